@@ -1,0 +1,58 @@
+"""Constitutive laws, written once in 3D, chosen by name with `make_material`.
+
+>>> from skdgmpm.materials import make_material
+>>> steel = make_material("svk", E=200e9, nu=0.3, rho=7800.0)
+"""
+
+from dataclasses import fields
+
+from skdgmpm.errors import InputError
+
+from .base import Material
+from .linear_elastic import LinearElastic
+from .neo_hookean import NeoHookean
+from .saint_venant_kirchhoff import SaintVenantKirchhoff
+
+LAWS = {
+    "linear_elastic": LinearElastic,
+    "saint_venant_kirchhoff": SaintVenantKirchhoff,
+    "neo_hookean": NeoHookean,
+}
+_ALIASES = {"svk": "saint_venant_kirchhoff"}
+
+__all__ = ["LAWS", "LinearElastic", "Material", "NeoHookean", "SaintVenantKirchhoff",
+           "make_material"]
+
+
+def make_material(law, **params):
+    """Build the material named ``law`` from keyword parameters.
+
+    Parameters
+    ----------
+    law : str
+        A key of `LAWS` or an alias (``"svk"``).
+    **params
+        The law's parameters (``E``, ``nu``, ``rho`` for the elastic laws).
+
+    Returns
+    -------
+    Material
+
+    Raises
+    ------
+    InputError
+        Unknown law, unknown or missing parameter, or a parameter out of range.
+    """
+    cls = LAWS.get(_ALIASES.get(law, law)) if isinstance(law, str) else None
+    if cls is None:
+        known = ", ".join(sorted([*LAWS, *_ALIASES]))
+        raise InputError(f"material: law = {law!r} is unknown; known laws: {known}")
+    names = [f.name for f in fields(cls) if f.init]
+    for key in params:
+        if key not in names:
+            raise InputError(f"material: parameter {key!r} is unknown for law {law!r}; "
+                             f"expected {', '.join(names)}")
+    missing = [name for name in names if name not in params]
+    if missing:
+        raise InputError(f"material: law {law!r} is missing parameter(s) {', '.join(missing)}")
+    return cls(**params)

@@ -1,0 +1,127 @@
+"""The material interface: validated elastic constants and the quantities every law derives.
+
+Shapes (once for the whole package): deformation gradients ``F`` are ``(..., 3, 3)`` with index
+order ``F[..., i, alpha]``; stresses have the same shape; the tangent is
+``C[..., i, alpha, j, beta] = dP[i, alpha] / dF[j, beta]``, shape ``(..., 3, 3, 3, 3)``;
+normals ``N`` are ``(..., d)`` with d <= 3 (or ``(d,)``, broadcast) in the reference
+configuration. A normal with d < 3 components lies in the first d axes and the acoustic tensor is
+its ``(d, d)`` block: the waves of the d-dimensional system (uniaxial strain in 1D, plane strain in
+2D), e.g. the 1D SVK bar is hyperbolic for F11 > 1/sqrt(3) [R18 eq A.10] although the 3D shear
+waves of the same state are lost earlier.
+"""
+
+import math
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from numbers import Real
+
+import numpy as np
+
+from skdgmpm.errors import InputError
+
+# Bounds per parameter: (lower, upper), open intervals; None means unbounded.
+_BOUNDS = {"E": (0.0, None), "nu": (-1.0, 0.5), "rho": (0.0, None)}
+
+
+def _check_parameter(name, value, lower, upper):
+    """Raise InputError unless ``lower < value < upper`` with ``value`` a finite real number."""
+    ok = isinstance(value, Real) and not isinstance(value, bool) and math.isfinite(value)
+    ok = ok and (lower is None or value > lower) and (upper is None or value < upper)
+    if not ok:
+        bounds = " and ".join(
+            s for s in (lower is not None and f"> {lower:g}", upper is not None and f"< {upper:g}")
+            if s
+        )
+        raise InputError(f"material: {name} = {value!r} must be a finite number {bounds}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Material(ABC):
+    """Isotropic elastic material, immutable, with keyword-only parameters.
+
+    Parameters
+    ----------
+    E : float
+        Young's modulus (Pa), > 0.
+    nu : float
+        Poisson's ratio, -1 < nu < 0.5.
+    rho : float
+        Reference mass density rho0 (kg/m^3), > 0.
+
+    Subclasses implement `first_piola`, `tangent` and `energy`; acoustic tensor, wave speeds,
+    hyperbolicity and Cauchy stress follow from them.
+    """
+
+    E: float
+    nu: float
+    rho: float
+
+    def __post_init__(self):
+        for name, (lower, upper) in _BOUNDS.items():
+            _check_parameter(name, getattr(self, name), lower, upper)
+
+    # -- elastic constants --------------------------------------------------------------------
+    @property
+    def lam(self):
+        """First Lamé parameter lambda = E nu / ((1 + nu)(1 - 2 nu)) (Pa)."""
+        return self.E * self.nu / ((1.0 + self.nu) * (1.0 - 2.0 * self.nu))
+
+    @property
+    def mu(self):
+        """Shear modulus mu = E / (2 (1 + nu)) (Pa)."""
+        return self.E / (2.0 * (1.0 + self.nu))
+
+    @property
+    def bulk(self):
+        """Bulk modulus kappa = E / (3 (1 - 2 nu)) (Pa)."""
+        return self.E / (3.0 * (1.0 - 2.0 * self.nu))
+
+    # -- the law ------------------------------------------------------------------------------
+    @abstractmethod
+    def first_piola(self, F):
+        """First Piola-Kirchhoff stress P(F), shape ``(..., 3, 3)`` (Pa)."""
+
+    @abstractmethod
+    def tangent(self, F):
+        """Analytic tangent C = dP/dF, shape ``(..., 3, 3, 3, 3)`` (Pa)."""
+
+    @abstractmethod
+    def energy(self, F):
+        """Stored energy density W(F) per reference volume, shape ``(...,)`` (J/m^3); P = dW/dF."""
+
+    # -- derived ------------------------------------------------------------------------------
+    def acoustic_tensor(self, F, N):
+        """Acoustic tensor ``A[..., i, j] = C[..., i, a, j, b] N[..., a] N[..., b]``, shape
+        ``(..., d, d)`` for ``N`` of shape ``(..., d)`` (Pa)."""
+        N = np.asarray(N, dtype=float)
+        d = N.shape[-1]
+        if not 1 <= d <= 3:
+            raise InputError(f"material: normal with {d} components; expected 1, 2 or 3")
+        C = self.tangent(F)[..., :d, :d, :d, :d]
+        return np.einsum("...iajb,...a,...b->...ij", C, N, N)
+
+    def wave_speeds(self, F, N):
+        """Wave speeds along ``N``, sqrt(eig(A) / rho), shape ``(..., d)``, sorted descending (m/s).
+
+        Non-positive eigenvalues (lost hyperbolicity) give speed 0, not NaN: check
+        `is_hyperbolic` to detect them.
+        """
+        A = self.acoustic_tensor(F, N)
+        omega = np.linalg.eigvalsh(0.5 * (A + np.swapaxes(A, -1, -2)))[..., ::-1]
+        return np.sqrt(np.clip(omega, 0.0, None) / self.rho)
+
+    def max_wave_speed(self, F, N):
+        """Largest wave speed along ``N``, shape ``(...,)`` (m/s)."""
+        return self.wave_speeds(F, N)[..., 0]
+
+    def is_hyperbolic(self, F, N):
+        """True where the acoustic tensor along ``N`` is positive definite, shape ``(...,)``."""
+        A = self.acoustic_tensor(F, N)
+        omega = np.linalg.eigvalsh(0.5 * (A + np.swapaxes(A, -1, -2)))
+        return omega[..., 0] > 0.0
+
+    def cauchy(self, F):
+        """Cauchy stress sigma = P F^T / J, shape ``(..., 3, 3)`` (Pa)."""
+        F = np.asarray(F, dtype=float)
+        J = np.linalg.det(F)
+        return self.first_piola(F) @ np.swapaxes(F, -1, -2) / J[..., None, None]

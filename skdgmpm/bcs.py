@@ -1,0 +1,187 @@
+"""Boundary conditions by ghost states [R18 §4.5], selected by boundary name.
+
+A ghost state copies the free quantities of the interior state and is solved for the imposed ones
+so that the stationary state Q* of the Riemann problem (interior, ghost) honours the condition.
+With the interior's linearisation on both sides, Q* lies on the interior's left-going
+characteristic ``t* - t_L = Z (v* - v_L)``; each condition below fixes, in an orthonormal frame,
+either the velocity or the traction component, which determines (t*, v*) exactly. The ghost state
+itself is then ``(2 t* - t_L, v_L)`` (velocity copied) and is never needed explicitly.
+
+Values may depend on time through a `Schedule` (step at t = 0, release at t_u, linear ramp).
+"""
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import InputError
+
+AXES = "xyz"
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """Amplitude a(t) multiplying a boundary value (after a release, imposed values are zero).
+
+    ``release`` (s): a(t) = 1 before, 0 from then on; ``ramp`` (s): a(t) = min(t / ramp, 1).
+    """
+
+    release: float = np.inf
+    ramp: float = 0.0
+
+    def __call__(self, t):
+        a = min(t / self.ramp, 1.0) if self.ramp > 0 else 1.0
+        return a if t < self.release else 0.0
+
+
+def _frame(N, local):
+    """(nf, d, d) rows = frame directions: global axes, or (normal, tangent) when ``local``."""
+    nf, d = N.shape
+    if not local or d == 1:
+        return np.broadcast_to(np.eye(d), (nf, d, d)) if not local else N[:, None, :].copy()
+    T = np.stack([-N[:, 1], N[:, 0]], axis=1)
+    return np.stack([N, T], axis=1)
+
+
+def star_state(frame, imposes_velocity, values, t_L, v_L, Z):
+    """Solve for (t*, v*) with ``t* - Z v* = t_L - Z v_L`` and, for each frame direction k,
+    ``e_k . v* = values[k]`` if ``imposes_velocity[k]`` else ``e_k . t* = values[k]``.
+
+    frame (nf, d, d), imposes_velocity (d,) bool, values (nf, d) or (d,), states (nf, d), Z (nf, d, d).
+    """
+    nf, d = v_L.shape
+    A = np.zeros((nf, 2 * d, 2 * d))
+    b = np.zeros((nf, 2 * d))
+    A[:, :d, :d] = np.eye(d)                        # unknowns x = [t*, v*]
+    A[:, :d, d:] = -Z
+    b[:, :d] = t_L - np.einsum("fij,fj->fi", Z, v_L)
+    sel = np.where(np.asarray(imposes_velocity)[None, :, None], 0, 1)
+    A[:, d:, :d] = frame * (sel == 1)
+    A[:, d:, d:] = frame * (sel == 0)
+    b[:, d:] = values
+    x = np.linalg.solve(A, b[..., None])[..., 0]
+    return x[:, :d], x[:, d:]
+
+
+@dataclass(frozen=True)
+class BoundaryCondition:
+    """Base class: ``star(t, t_L, v_L, Z, N)`` returns the boundary stationary state (t*, v*)."""
+
+    schedule: Schedule = field(default_factory=Schedule, kw_only=True)
+
+    def star(self, time, t_L, v_L, Z, N):
+        raise NotImplementedError
+
+
+@dataclass(frozen=True)
+class Mixed(BoundaryCondition):
+    """Per global axis, an imposed velocity or traction component (m/s or Pa)."""
+
+    velocity: dict = field(default_factory=dict)
+    traction: dict = field(default_factory=dict)
+
+    def star(self, time, t_L, v_L, Z, N):
+        d = N.shape[1]
+        a = self.schedule(time)
+        imposes_velocity = np.array([AXES[k] in self.velocity for k in range(d)])
+        values = np.array([self.velocity.get(AXES[k], self.traction.get(AXES[k], 0.0))
+                           for k in range(d)], dtype=float)
+        values = values * a
+        return star_state(_frame(N, False), imposes_velocity, values, t_L, v_L, Z)
+
+
+def Velocity(value, schedule=Schedule()):
+    """Imposed velocity vector (m/s)."""
+    return Mixed(velocity=dict(zip(AXES, map(float, value))), schedule=schedule)
+
+
+def Traction(value, schedule=Schedule()):
+    """Imposed traction vector t = P N (Pa); zero is a free surface."""
+    return Mixed(traction=dict(zip(AXES, map(float, value))), schedule=schedule)
+
+
+@dataclass(frozen=True)
+class NormalVelocity(BoundaryCondition):
+    """Imposed velocity along the outward normal (m/s), zero tangential traction.
+
+    ``value = 0`` is a symmetry plane (sliding wall).
+    """
+
+    value: float = 0.0
+
+    def star(self, time, t_L, v_L, Z, N):
+        d = N.shape[1]
+        imposes_velocity = np.array([True] + [False] * (d - 1))
+        values = np.zeros(d)
+        values[0] = self.value * self.schedule(time)
+        return star_state(_frame(N, True), imposes_velocity, values, t_L, v_L, Z)
+
+
+def Symmetry(schedule=Schedule()):
+    return NormalVelocity(0.0, schedule=schedule)
+
+
+@dataclass(frozen=True)
+class Transmissive(BoundaryCondition):
+    """Ghost = interior: waves leave without reflection (exact for normal incidence)."""
+
+    def star(self, time, t_L, v_L, Z, N):
+        return t_L.copy(), v_L.copy()
+
+
+KINDS = ("velocity", "traction", "free", "symmetry", "normal_velocity", "transmissive", "mixed")
+
+
+def make_bc(spec, d, where="boundary"):
+    """Build a condition from a scene table, e.g. ``{kind = "traction", value = [-1e9]}``."""
+    spec = dict(spec)
+    kind = spec.pop("kind", None)
+    if kind not in KINDS:
+        raise InputError(f"{where}.kind = {kind!r}: expected one of {', '.join(KINDS)}")
+    schedule = Schedule(release=float(spec.pop("release", np.inf)), ramp=float(spec.pop("ramp", 0.0)))
+
+    def vector(key):
+        value = spec.pop(key, None)
+        if value is None:
+            raise InputError(f"{where}.{key} is missing for kind = {kind!r}")
+        value = np.atleast_1d(np.asarray(value, dtype=float)) if _numeric(value) else None
+        if value is None or value.shape != (d,):
+            raise InputError(f"{where}.{key} = {spec.get(key, value)!r} must be {d} number(s)")
+        return value
+
+    if kind == "velocity":
+        bc = Velocity(vector("value"), schedule)
+    elif kind == "traction":
+        bc = Traction(vector("value"), schedule)
+    elif kind == "free":
+        bc = Traction(np.zeros(d), schedule)
+    elif kind == "symmetry":
+        bc = Symmetry(schedule)
+    elif kind == "normal_velocity":
+        bc = NormalVelocity(float(spec.pop("value", 0.0)), schedule=schedule)
+    elif kind == "transmissive":
+        bc = Transmissive(schedule=schedule)
+    else:
+        parts = {}
+        for key in ("velocity", "traction"):
+            table = dict(spec.pop(key, {}))
+            for axis, value in table.items():
+                if axis not in AXES[:d] or not _numeric(value):
+                    raise InputError(f"{where}.{key}.{axis} = {value!r}: expected axis in "
+                                     f"{AXES[:d]} and a number")
+            parts[key] = {k: float(v) for k, v in table.items()}
+        overlap = set(parts["velocity"]) & set(parts["traction"])
+        if overlap or len(parts["velocity"]) + len(parts["traction"]) != d:
+            raise InputError(f"{where}: mixed needs exactly one of velocity/traction per axis "
+                             f"{AXES[:d]}, got velocity={parts['velocity']} traction={parts['traction']}")
+        bc = Mixed(**parts, schedule=schedule)
+    if spec:
+        raise InputError(f"{where}: unknown key {next(iter(spec))!r} for kind = {kind!r}")
+    return bc
+
+
+def _numeric(value):
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        return False
+    return bool(np.all(np.isfinite(arr)))

@@ -1,0 +1,302 @@
+"""Exact solutions of the 1D bar problems of [R18 §7.1-7.2, App. A] and error norms.
+
+Both problems solve the 1D total-Lagrangian system (METHOD §1)
+
+    dF/dt - dv/dX = 0,        rho dv/dt - dP/dX = 0,
+
+at reference positions ``X`` (shape ``(n, d)``, only ``X[:, 0]`` is used; a 1-D array is
+accepted too). ``fields(X, t)`` returns a dict of 1-D arrays (one value per point) with at
+least ``"P11"`` (first Piola-Kirchhoff stress, Pa), ``"v1"`` (m/s) and ``"F11"``.
+
+Convention at discontinuities: a point lying exactly on a front (or a fan edge) takes the state
+behind it, i.e. the side connected to the loaded end. Times must be ``t >= 0``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import MISSING, dataclass, field, fields as dc_fields
+
+import numpy as np
+from scipy.optimize import brentq
+
+from skdgmpm.errors import InputError
+
+__all__ = ["EXACT", "ElasticBarStep", "SVKBarRiemann", "error_norms", "make_exact"]
+
+
+def _check(cls, key, value, ok, what):
+    """Raise a one-line InputError unless ``value`` is a finite real number with ``ok(value)``."""
+    try:
+        good = not isinstance(value, bool) and math.isfinite(float(value)) and ok(float(value))
+    except (TypeError, ValueError):
+        good = False
+    if not good:
+        raise InputError(f"{cls.__name__}: bad value for '{key}': {value!r} (expected {what})")
+    return float(value)
+
+
+def _positions(X):
+    X = np.asarray(X, dtype=float)
+    if X.ndim == 2 and X.shape[1] >= 1:
+        return X[:, 0]
+    if X.ndim == 1:
+        return X
+    raise InputError(f"exact solution: bad shape for 'X': {X.shape} (expected (n, d))")
+
+
+def _time(t):
+    t = float(t)
+    if not (math.isfinite(t) and t >= 0.0):
+        raise InputError(f"exact solution: bad value for 't': {t!r} (expected t >= 0)")
+    return t
+
+
+@dataclass(frozen=True, kw_only=True)
+class ElasticBarStep:
+    """Linear elastic bar ``0 <= X <= L`` under a traction step at ``X = 0``, fixed at ``X = L``.
+
+    Uniaxial stress: ``P11 = E (F11 - 1)``, ``c = sqrt(E / rho)``, impedance ``Z = rho c``
+    [R18 §7.1]. At rest for ``t < 0``; for ``t >= 0`` the left end carries ``P11 = traction``
+    (negative: compression, e.g. ``-1e9``) and the right end ``v = 0``.
+
+    The d'Alembert solution is a sum of step fronts (method of images). Front ``j = 0, 1, ...``
+    leaves an end at ``t = j L / c``; even ``j`` run right (``X = c t - j L``), odd ``j`` run
+    left (``X = (j + 1) L - c t``). Stress jumps are ``traction * (+1, +1, -1, -1)`` repeating
+    (the fixed end doubles the stress, the loaded end restores ``P11 = traction``); the velocity
+    jump is ``-dP / Z`` for right-going and ``+dP / Z`` for left-going fronts. Hence behind the
+    incident front ``v = -traction / Z`` (> 0 in compression), behind the first reflection
+    ``P11 = 2 traction`` and ``v = 0``. The motion has period ``4 L / c`` (at ``c t = 4 L`` the
+    bar is at rest and unstrained), which is used to evaluate any ``t`` with four fronts.
+
+    Parameters
+    ----------
+    length, E, rho : float
+        Bar length (m), Young's modulus (Pa), density (kg/m^3), all > 0.
+    traction : float
+        Imposed ``P11`` at ``X = 0`` (Pa).
+    """
+
+    length: float
+    E: float
+    rho: float
+    traction: float
+
+    def __post_init__(self):
+        for key in ("length", "E", "rho"):
+            object.__setattr__(self, key, _check(type(self), key, getattr(self, key),
+                                                 lambda x: x > 0, "a number > 0"))
+        object.__setattr__(self, "traction", _check(type(self), "traction", self.traction,
+                                                    lambda x: True, "a finite number"))
+
+    @property
+    def c(self):
+        """Wave speed ``sqrt(E / rho)`` (m/s)."""
+        return math.sqrt(self.E / self.rho)
+
+    def fields(self, X, t):
+        """Exact fields at reference positions ``X`` and time ``t``.
+
+        Returns
+        -------
+        dict
+            ``"P11"``, ``"v1"``, ``"F11"`` and ``"u1"`` (displacement, ``u1(L) = 0``).
+        """
+        x = _positions(X)
+        L, c, T = self.length, self.c, self.traction
+        Z = self.rho * c
+        tau = math.fmod(c * _time(t), 4.0 * L)  # c t reduced to one period
+        j = np.arange(4)
+        dP = T * np.array([1.0, 1.0, -1.0, -1.0])
+        right = j % 2 == 0
+        dv = np.where(right, -dP / Z, dP / Z)
+        dist = j * L + np.where(right, x[:, None], L - x[:, None])  # c t at which front j passes
+        behind = tau >= dist
+        lag = np.where(behind, (tau - dist) / c, 0.0)  # time since front j passed
+        P = behind @ dP
+        return {"P11": P, "v1": behind @ dv, "F11": 1.0 + P / self.E, "u1": lag @ dv}
+
+
+@dataclass(frozen=True, kw_only=True)
+class SVKBarRiemann:
+    """Saint-Venant-Kirchhoff half-space ``X >= 0`` in uniaxial strain under a traction step.
+
+    ``P11 = Pi(F) = K/2 F (F^2 - 1)``, ``P22 = lam/2 (F^2 - 1)`` [R18 eq A.5], ``K = lam + 2 mu``
+    from ``E, nu``; longitudinal speed ``c(F) = sqrt(K (3 F^2 - 1) / (2 rho))`` [R18 eq A.8],
+    real for ``F > 1/sqrt(3)`` [R18 eq A.10]. Initially at rest (``F = 1, v = 0``); for
+    ``t >= 0`` the traction ``Pi = traction`` is held at ``X = 0``. The solution is one 2-wave
+    from the loaded state ``F*`` (``Pi(F*) = traction``, the root with ``F* > 1/sqrt(3)``; none
+    when ``traction <= Pi(1/sqrt(3)) = -K / (3 sqrt(3))``: loss of hyperbolicity, InputError) to
+    the rest state:
+
+    * compression (``F* < 1``): ``c`` grows with ``F``, so a centred rarefaction. For
+      ``c(F*) t <= X <= c(1) t`` the state solves ``c(F) = xi = X/t``, i.e.
+      ``F(xi) = sqrt((2 rho xi^2 / K + 1) / 3)``. [R18 eq A.23] as printed,
+      ``sqrt(2 rho xi^2 / (3 K) + 1)``, misplaces the 1/3 (it gives ``F(c(1)) != 1``); the
+      formula here is derived directly from ``xi = c(F)``. Velocity along the 2-integral curve
+      through the rest state: ``dv = -c(F) dF``, ``v(F) = int_F^1 c(s) ds``, in closed form
+      with ``int sqrt(3 s^2 - 1) ds = s/2 sqrt(3 s^2 - 1) - ln(sqrt(3) s + sqrt(3 s^2 - 1)) /
+      (2 sqrt(3))`` (this agrees with [R18 eq A.22]).
+    * tension (``F* > 1``): a shock of speed ``s = sqrt(Pi(F*) / (rho (F* - 1)))
+      = sqrt(K F* (F* + 1) / (2 rho))`` and ``v* = -s (F* - 1)`` (Rankine-Hugoniot
+      [R18 eq A.12-A.16]); the Lax condition ``c(F*) > s > c(1)`` holds for every ``F* > 1``.
+
+    Parameters
+    ----------
+    E, nu, rho : float
+        Young's modulus (Pa, > 0), Poisson ratio (in (-1, 0.5)), density (kg/m^3, > 0).
+    traction : float
+        Imposed ``P11`` at ``X = 0`` (Pa): negative is compression.
+    length : float or None
+        Optional bar length (m): not used by the solution, which is exact for a finite bar
+        until ``t_max = length / (fastest wave speed)``.
+    """
+
+    E: float
+    nu: float
+    rho: float
+    traction: float
+    length: float | None = None
+    lam: float = field(init=False)
+    mu: float = field(init=False)
+    K: float = field(init=False)
+    F_star: float = field(init=False)
+    v_star: float = field(init=False)
+    wave: str = field(init=False)
+    speeds: tuple = field(init=False)
+
+    def __post_init__(self):
+        cls, put = type(self), lambda k, v: object.__setattr__(self, k, v)
+        put("E", _check(cls, "E", self.E, lambda x: x > 0, "a number > 0"))
+        put("rho", _check(cls, "rho", self.rho, lambda x: x > 0, "a number > 0"))
+        put("nu", _check(cls, "nu", self.nu, lambda x: -1 < x < 0.5, "a number in (-1, 0.5)"))
+        put("traction", _check(cls, "traction", self.traction, lambda x: True, "a finite number"))
+        if self.length is not None:
+            put("length", _check(cls, "length", self.length, lambda x: x > 0, "a number > 0"))
+        lam = self.E * self.nu / ((1 + self.nu) * (1 - 2 * self.nu))
+        mu = self.E / (2 * (1 + self.nu))
+        K = lam + 2 * mu
+        put("lam", lam), put("mu", mu), put("K", K)
+        T = self.traction
+        if T <= -K / (3 * math.sqrt(3)):
+            raise InputError(f"{cls.__name__}: bad value for 'traction': {T!r} (loss of "
+                             f"hyperbolicity: needs traction > -(lam+2mu)/(3 sqrt 3) = "
+                             f"{-K / (3 * math.sqrt(3)):.6g})")
+        # solve Pi(1 + e) = T for e = F - 1 (keeps relative accuracy for tiny loads)
+        g = lambda e: 0.5 * K * e * (2 + 3 * e + e * e) - T  # noqa: E731
+        e = 0.0 if T == 0 else brentq(g, 1 / math.sqrt(3) - 1, (2 * abs(T) / K) ** (1 / 3),
+                                      xtol=1e-300, rtol=4 * np.finfo(float).eps, maxiter=500)
+        Fs = 1.0 + e
+        put("F_star", Fs)
+        if Fs < 1:
+            put("wave", "rarefaction")
+            put("speeds", (float(self.c(Fs)), float(self.c(1.0))))
+            put("v_star", float(self.integral_curve_velocity(Fs)))
+        else:  # tension, or no load (zero-strength wave at c(1))
+            s = math.sqrt(K * Fs * (Fs + 1) / (2 * self.rho))
+            put("wave", "shock")
+            put("speeds", (s, s))
+            put("v_star", -s * e)
+
+    def Pi(self, F):
+        """Axial stress ``P11 = K/2 F (F^2 - 1)``."""
+        F = np.asarray(F, dtype=float)
+        return 0.5 * self.K * F * (F * F - 1)
+
+    def c(self, F):
+        """Longitudinal wave speed ``sqrt(K (3 F^2 - 1) / (2 rho))``."""
+        F = np.asarray(F, dtype=float)
+        return np.sqrt(self.K * (3 * F * F - 1) / (2 * self.rho))
+
+    def integral_curve_velocity(self, F):
+        """Velocity on the 2-integral curve through the rest state: ``int_F^1 c(s) ds``."""
+        F = np.asarray(F, dtype=float)
+
+        def G(s):  # antiderivative of sqrt(3 s^2 - 1)
+            r = np.sqrt(3 * s * s - 1)
+            return 0.5 * s * r - np.log(math.sqrt(3) * s + r) / (2 * math.sqrt(3))
+
+        return math.sqrt(self.K / (2 * self.rho)) * (G(1.0) - G(F))
+
+    def fan_F(self, xi):
+        """``F`` inside the rarefaction fan: the root of ``c(F) = xi``."""
+        xi = np.asarray(xi, dtype=float)
+        return np.sqrt((2 * self.rho * xi * xi / self.K + 1) / 3)
+
+    @property
+    def t_max(self):
+        """Time until the fastest wave reaches ``X = length`` (``inf`` without a length)."""
+        return math.inf if self.length is None else self.length / self.speeds[1]
+
+    def fields(self, X, t):
+        """Exact fields at reference positions ``X`` and time ``t``.
+
+        Returns
+        -------
+        dict
+            ``"P11"``, ``"P22"``, ``"v1"`` and ``"F11"``.
+        """
+        x, t = _positions(X), _time(t)
+        lo, hi = self.speeds
+        star = x <= lo * t
+        fan = ~star & (x < hi * t)  # empty for a shock (lo == hi)
+        F = np.where(star, self.F_star, 1.0)
+        v = np.where(star, self.v_star, 0.0)
+        if np.any(fan):
+            Ff = self.fan_F(x[fan] / t)
+            F[fan], v[fan] = Ff, self.integral_curve_velocity(Ff)
+        return {"P11": self.Pi(F), "P22": 0.5 * self.lam * (F * F - 1), "v1": v, "F11": F}
+
+
+EXACT = {"elastic_bar_step": ElasticBarStep, "svk_bar_riemann": SVKBarRiemann}
+
+
+def make_exact(name, **params):
+    """Build the exact solution registered as ``name`` from keyword parameters.
+
+    Raises
+    ------
+    InputError
+        Unknown name, unknown or missing parameter, or bad value.
+    """
+    if name not in EXACT:
+        raise InputError(f"exact solution: unknown name {name!r} (known: {', '.join(EXACT)})")
+    cls = EXACT[name]
+    known = {f.name: f for f in dc_fields(cls) if f.init}
+    for key, value in params.items():
+        if key not in known:
+            raise InputError(f"exact solution {name!r}: unknown parameter {key!r} = {value!r} "
+                             f"(known: {', '.join(known)})")
+    missing = [k for k, f in known.items() if k not in params
+               and f.default is MISSING and f.default_factory is MISSING]
+    if missing:
+        raise InputError(f"exact solution {name!r}: missing parameter {missing[0]!r}")
+    return cls(**params)
+
+
+def error_norms(numerical, exact, weights):
+    """Weighted error norms of a 1-D field (e.g. weights = particle volumes).
+
+    ``L1_rel = sum w |e| / sum w |u|``, ``L2_rel = sqrt(sum w e^2 / sum w u^2)`` with
+    ``e = numerical - exact`` and ``u = exact``; ``Linf = max |e|`` (absolute). When the exact
+    field is identically zero (zero denominators) ``L1_rel`` and ``L2_rel`` hold the absolute
+    norms ``sum w |e|`` and ``sqrt(sum w e^2)`` instead.
+
+    Returns
+    -------
+    dict
+        ``{"L1_rel": float, "L2_rel": float, "Linf": float}``.
+    """
+    a, b, w = (np.asarray(z, dtype=float) for z in (numerical, exact, weights))
+    if not (a.ndim == 1 and a.shape == b.shape == w.shape):
+        raise InputError(f"error_norms: shapes of numerical, exact, weights must be equal and "
+                         f"1-D, got {a.shape}, {b.shape}, {w.shape}")
+    if np.any(w < 0):
+        raise InputError("error_norms: bad value for 'weights': negative entries")
+    e = np.abs(a - b)
+    d1, d2 = np.sum(w * np.abs(b)), np.sum(w * b * b)
+    return {
+        "L1_rel": float(np.sum(w * e) / (d1 if d1 > 0 else 1.0)),
+        "L2_rel": float(np.sqrt(np.sum(w * e * e) / (d2 if d2 > 0 else 1.0))),
+        "Linf": float(e.max(initial=0.0)),
+    }

@@ -1,0 +1,77 @@
+"""Faces of the active sub-mesh and their trace operators, built once from scikit-fem facet bases.
+
+First-order DGMPM solves one Riemann problem per face with side-averaged states [R18 §4.1]: the
+operators here give the face average of each side's DG trace, and the surface integral
+``int_Gamma Phi_i F*`` of a face-constant flux F* (see ``skdgmpm.forms.surface_flux``).
+"""
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from skfem import FacetBasis, InteriorFacetBasis
+
+
+def _average_trace(fb):
+    """(n_faces, n_dofs) face-averaged trace of a facet basis, and face measures (n_faces,)."""
+    w = fb.dx                                                      # (nf, nqp)
+    measure = w.sum(axis=1)
+    nf = w.shape[0]
+    rows, cols, vals = [], [], []
+    for k in range(fb.Nbfun):
+        phi = np.asarray(fb.basis[k][0])                           # (nf, nqp)
+        rows.append(np.arange(nf))
+        cols.append(fb.element_dofs[k])
+        vals.append((phi * w).sum(axis=1) / measure)
+    T = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(nf, fb.N))
+    T.eliminate_zeros()
+    return T, measure
+
+
+@dataclass(frozen=True)
+class FaceSet:
+    """A set of faces with side-averaged traces.
+
+    Attributes
+    ----------
+    facets : (nf,) facet indices in the active sub-mesh
+    normal : (nf, d) unit normal, from side L to side R (outward on boundary faces)
+    measure : (nf,) face length (2D) or 1 (1D)
+    cell_L, cell_R : (nf,) cells on each side (``cell_R`` is -1 on boundary faces)
+    T_L, T_R : (nf, n_dofs) face-average trace operators (``T_R`` is None on boundary faces)
+    """
+
+    facets: np.ndarray
+    normal: np.ndarray
+    measure: np.ndarray
+    cell_L: np.ndarray
+    cell_R: np.ndarray
+    T_L: sp.csr_matrix
+    T_R: sp.csr_matrix = None
+
+    def __len__(self):
+        return len(self.facets)
+
+    def integrate(self, flux, side="L"):
+        """``int_Gamma Phi_i F*`` on the given side for face-constant ``flux`` (nf, ncomp)."""
+        T = self.T_L if side == "L" else self.T_R
+        return T.T @ (self.measure[:, None] * flux)
+
+
+def interior_faces(mesh, element):
+    fb = [InteriorFacetBasis(mesh, element, side=i) for i in (0, 1)]
+    T_L, measure = _average_trace(fb[0])
+    T_R, _ = _average_trace(fb[1])
+    normal = fb[0].normals[:, :, 0].T.copy()
+    return FaceSet(fb[0].find, normal, measure, fb[0].tind, fb[1].tind, T_L, T_R)
+
+
+def boundary_faces(mesh, element, facets, n_dofs):
+    facets = np.asarray(facets, dtype=np.int64)
+    if len(facets) == 0:
+        return FaceSet(facets, np.zeros((0, mesh.dim())), np.zeros(0), facets, facets,
+                       sp.csr_matrix((0, n_dofs)))
+    fb = FacetBasis(mesh, element, facets=facets)
+    T, measure = _average_trace(fb)
+    normal = fb.normals[:, :, 0].T.copy()
+    return FaceSet(fb.find, normal, measure, fb.tind, -np.ones_like(fb.tind), T)

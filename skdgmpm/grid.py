@@ -1,0 +1,162 @@
+"""Background grids in the reference configuration: generation, mesh files, named boundaries.
+
+A `Grid` is the full scikit-fem mesh plus the *active* sub-mesh made of the cells that hold
+particles. Only the active sub-mesh carries degrees of freedom: inactive cells cost nothing, and
+the boundary of the active sub-mesh is the body's boundary [R18 Fig. 1].
+"""
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from skfem import ElementDG, ElementLineP1, ElementQuad1, ElementQuadDG, MeshLine, MeshQuad
+
+from .errors import InputError
+
+#: name given to boundary facets of the body that lie on no named grid boundary
+SURFACE = "surface"
+
+
+def line(length, cells, origin=0.0):
+    """Uniform 1D grid on [origin, origin + length] with boundaries ``left`` and ``right``."""
+    x = np.linspace(origin, origin + length, int(cells) + 1)
+    return MeshLine(x).with_boundaries({
+        "left": lambda p: np.isclose(p[0], x[0]),
+        "right": lambda p: np.isclose(p[0], x[-1]),
+    })
+
+
+def rectangle(lx, ly, nx, ny, origin=(0.0, 0.0)):
+    """Uniform quad grid, counter-clockwise cells numbered x fastest.
+
+    Boundaries ``left``, ``right``, ``bottom``, ``top``. (``MeshQuad.init_tensor`` numbers
+    cells y fastest with clockwise orientation; we want the reference axes of a cell to follow
+    the global axes so that particle layouts read naturally.)
+    """
+    x = np.linspace(origin[0], origin[0] + lx, int(nx) + 1)
+    y = np.linspace(origin[1], origin[1] + ly, int(ny) + 1)
+    X, Y = np.meshgrid(x, y)                     # (ny+1, nx+1), x fastest
+    p = np.vstack([X.ravel(), Y.ravel()])
+    n = np.arange((nx + 1) * (ny + 1)).reshape(ny + 1, nx + 1)
+    t = np.vstack([n[:-1, :-1].ravel(), n[:-1, 1:].ravel(), n[1:, 1:].ravel(), n[1:, :-1].ravel()])
+    return MeshQuad(p, t).with_boundaries({
+        "left": lambda q: np.isclose(q[0], x[0]),
+        "right": lambda q: np.isclose(q[0], x[-1]),
+        "bottom": lambda q: np.isclose(q[1], y[0]),
+        "top": lambda q: np.isclose(q[1], y[-1]),
+    })
+
+
+def load_mesh(path):
+    """Read a quad mesh through meshio; gmsh physical groups become named boundaries/subdomains."""
+    import meshio
+    from skfem.io.meshio import from_meshio
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: mesh file not found")
+    try:
+        mesh = from_meshio(meshio.read(path))
+    except Exception as exc:  # meshio raises many types; the user needs the file name
+        raise InputError(f"{path}: cannot read mesh ({type(exc).__name__}: {exc})") from None
+    if not isinstance(mesh, (MeshQuad, MeshLine)):
+        raise InputError(f"{path}: grid must be made of quads (or lines in 1D), got {type(mesh).__name__}")
+    if isinstance(mesh, MeshQuad):
+        mesh = _counter_clockwise(mesh)
+    return mesh
+
+
+def _counter_clockwise(mesh):
+    """Reorder clockwise quads so that detJ > 0 everywhere (keeps boundary names)."""
+    p, t = mesh.p, mesh.t
+    a = p[:, t[1]] - p[:, t[0]]
+    b = p[:, t[3]] - p[:, t[0]]
+    cw = a[0] * b[1] - a[1] * b[0] < 0
+    if not cw.any():
+        return mesh
+    t = t.copy()
+    t[1, cw], t[3, cw] = mesh.t[3, cw], mesh.t[1, cw]
+    return _with_facet_names(type(mesh)(p, t), mesh, mesh.boundaries or {}, np.arange(p.shape[1]))
+
+
+def _facet_keys(mesh, facets, node_map):
+    """Hashable key (sorted original node indices) for each facet."""
+    nodes = node_map[mesh.facets[:, facets]]
+    return [tuple(k) for k in np.sort(nodes, axis=0).T]
+
+
+def _with_facet_names(new, old, boundaries, new_to_old):
+    """Carry named facet sets of ``old`` over to ``new`` by matching facet vertices."""
+    keys = {k: i for i, k in enumerate(_facet_keys(new, np.arange(new.nfacets), new_to_old))}
+    named = {}
+    for name, facets in boundaries.items():
+        old_keys = _facet_keys(old, np.asarray(facets), np.arange(old.p.shape[1]))
+        named[name] = np.array(sorted(keys[k] for k in old_keys if k in keys), dtype=np.int64)
+    return new.with_boundaries(named) if named else new
+
+
+def facets_in_box(mesh, box, facets=None):
+    """Boundary facets whose midpoint lies in ``box`` = {"x": [lo, hi], "y": [lo, hi]}."""
+    facets = mesh.boundary_facets() if facets is None else facets
+    mid = mesh.p[:, mesh.facets[:, facets]].mean(axis=1)
+    span = np.ptp(mesh.p, axis=1).max()
+    keep = np.ones(len(facets), dtype=bool)
+    for axis, key in enumerate("xyz"[: mesh.dim()]):
+        if key in box:
+            lo, hi = box[key]
+            keep &= (mid[axis] >= lo - 1e-9 * span) & (mid[axis] <= hi + 1e-9 * span)
+    return facets[keep]
+
+
+@dataclass
+class Grid:
+    """Full grid, its active sub-mesh and the DG element.
+
+    Attributes
+    ----------
+    mesh : skfem.Mesh
+        Full background grid (reference configuration).
+    active : (n_active,) int
+        Indices of active cells in ``mesh``.
+    submesh : skfem.Mesh
+        Mesh of the active cells; boundary facets carry the grid's names, or ``SURFACE``.
+    """
+
+    mesh: object
+    active: np.ndarray
+    submesh: object = field(init=False)
+    element: object = field(init=False)
+
+    def __post_init__(self):
+        self.active = np.asarray(self.active, dtype=np.int64)
+        sub, node_map = self.mesh.restrict(self.active, return_mapping=True, skip_boundaries=True)
+        names = dict(self.mesh.boundaries or {})
+        sub = _with_facet_names(sub, self.mesh, names, node_map)
+        named = np.concatenate([np.zeros(0, np.int64), *sub.boundaries.values()]) if names else []
+        surface = np.setdiff1d(sub.boundary_facets(), named)
+        self.submesh = sub.with_boundaries({**(sub.boundaries or {}), SURFACE: surface})
+        self.element = (ElementDG(ElementLineP1()) if self.dim == 1
+                        else ElementQuadDG(ElementQuad1()))
+
+    @property
+    def dim(self):
+        return self.mesh.dim()
+
+    @property
+    def boundary_names(self):
+        return tuple(self.submesh.boundaries)
+
+    def cell_sizes(self):
+        """(n_active,) smallest height of each active cell (area / longest edge in 2D)."""
+        m = self.submesh
+        if self.dim == 1:
+            return np.abs(np.diff(m.p[0, m.t], axis=0))[0]
+        edges = np.linalg.norm(m.p[:, m.facets[0, m.t2f]] - m.p[:, m.facets[1, m.t2f]], axis=0)
+        return self.cell_volumes() / edges.max(axis=0)
+
+    def cell_volumes(self):
+        """(n_active,) cell length (1D) or area (2D)."""
+        m = self.submesh
+        if self.dim == 1:
+            return np.abs(np.diff(m.p[0, m.t], axis=0))[0]
+        x, y = m.p[0, m.t], m.p[1, m.t]
+        return 0.5 * np.abs(np.sum(x * np.roll(y, -1, axis=0) - np.roll(x, -1, axis=0) * y, axis=0))

@@ -1,0 +1,105 @@
+"""Particle quadrature: the forms of ``skdgmpm.forms`` integrated at material points.
+
+DGMPM replaces Gauss quadrature by the material points of each cell, with their volumes as
+weights [R18 eq 14-18]; the same forms with Gauss points give DGFEM. Everything here is built once
+per grid (total Lagrangian: particles never change cell).
+"""
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from skfem import CellBasis
+
+from skdgmpm import forms
+
+
+def particle_basis(grid, particles):
+    """CellBasis on the active sub-mesh whose quadrature points are the particles.
+
+    Cells hold different numbers of particles: they are padded to the largest count with points at
+    the cell centre and zero weight. Returns the basis and ``slot`` (n_particles,), the flat index
+    of each particle in the (cell, point) quadrature array.
+    """
+    nel = grid.submesh.nelements
+    counts = np.bincount(particles.cell, minlength=nel)
+    nq = max(int(counts.max()), 1)
+    order = np.argsort(particles.cell, kind="stable")
+    start = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    local = np.empty(len(particles), dtype=np.int64)
+    local[order] = np.arange(len(particles)) - np.repeat(start, counts)
+    slot = particles.cell * nq + local
+
+    d = grid.dim
+    Xe = np.full((d, nel * nq), 0.5)
+    Xe[:, slot] = particles.xi.T
+    W = np.zeros(nel * nq)
+    W[slot] = particles.volume
+    basis = CellBasis(grid.submesh, grid.element, quadrature=(Xe.reshape(d, nel, nq), np.ones((nel, nq))),
+                      elements=np.arange(nel))
+    basis.dx = W.reshape(nel, nq)          # volumes as weights, replacing w_q |det J|
+    return basis, slot
+
+
+def interpolation_matrix(basis, slot):
+    """Sparse S (n_points x n_dofs) with S[p, i] = Phi_i(X_p) for the quadrature points ``slot``."""
+    nel, nq = basis.dx.shape
+    rows, cols, vals = [], [], []
+    for k in range(basis.Nbfun):                                     # local basis functions
+        phi = np.asarray(basis.basis[k][0]).reshape(-1)              # (nel * nq,)
+        rows.append(np.arange(len(slot)))
+        cols.append(np.repeat(basis.element_dofs[k], nq)[slot])
+        vals.append(phi[slot])
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                         shape=(len(slot), basis.N))
+
+
+@dataclass(frozen=True)
+class VolumeOperators:
+    """Grid operators from one quadrature (particles or Gauss points).
+
+    Attributes
+    ----------
+    mass : (n_dofs, n_dofs) consistent mass, ``int Phi_i Phi_j`` (volume-weighted)
+    lumped : (n_dofs,) row sums of ``mass`` [R18 eq 38]
+    stiffness : list of d sparse (n_dofs, n_dofs), K^alpha [R18 eq 38]
+    """
+
+    mass: sp.csr_matrix
+    lumped: np.ndarray
+    stiffness: tuple
+
+    @classmethod
+    def assemble(cls, basis):
+        mass = forms.mass.assemble(basis).tocsr()
+        stiffness = tuple(forms.pseudo_stiffness(a).assemble(basis).tocsr()
+                          for a in range(basis.mesh.dim()))
+        return cls(mass, np.asarray(mass.sum(axis=1)).ravel(), stiffness)
+
+
+@dataclass(frozen=True)
+class ParticleMap:
+    """Particle <-> grid maps of first-order DGMPM.
+
+    ``project`` is the volume-weighted least-squares map ``M_i U_i = sum_p S_ip V_p U_p``
+    [R18 eq 39] (for the momentum p = rho0 v this is the paper's mass-weighted map);
+    ``interpolate`` is ``U_p = sum_i S_ip U_i`` [R18 eq 40].
+    """
+
+    S: sp.csr_matrix               # (n_particles, n_dofs)
+    P2G: sp.csr_matrix             # (n_dofs, n_particles) = diag(1/M) S^T diag(V)
+    rho: np.ndarray                # (n_dofs,) nodal reference density
+    active_dofs: np.ndarray        # (n_dofs,) bool: M_i > 0
+
+    @classmethod
+    def build(cls, S, volume, rho0, lumped):
+        active = lumped > 0
+        inv = np.where(active, 1.0 / np.where(active, lumped, 1.0), 0.0)
+        P2G = (sp.diags(inv) @ S.T @ sp.diags(volume)).tocsr()
+        rho = P2G @ rho0
+        return cls(S, P2G, rho, active)
+
+    def project(self, values):
+        return self.P2G @ values
+
+    def interpolate(self, nodal):
+        return self.S @ nodal

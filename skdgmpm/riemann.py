@@ -1,0 +1,97 @@
+"""Linearised Godunov solver for Q = [P, v] along a face normal N [R18 §4], [L23 eq 35-37].
+
+Closed form: the waves of family k travel at +-sqrt(omega_k / rho0), with (omega_k, Y_k) the
+eigenpairs of the acoustic tensor A_N = C_iajb N_a N_b. Across the left-going waves (side L's
+linearisation) and the right-going waves (side R's) traction t = P N and velocity v satisfy
+
+    t* - t_L = Z_L (v* - v_L),      t* - t_R = -Z_R (v* - v_R),      Z = sqrt(rho0 A_N),
+
+so the stationary state is v* = (Z_L + Z_R)^-1 (t_R - t_L + Z_L v_L + Z_R v_R). The flux, linear in
+Q, needs only (t*, v*). All functions are batched over faces: traction and velocity (nf, d),
+impedances (nf, d, d), tangents C (nf, d, d, d, d).
+"""
+import numpy as np
+
+from .errors import InstabilityError
+
+
+def acoustic_tensor(C, N):
+    """A_ij = C_iajb N_a N_b: (nf, d, d)."""
+    return np.einsum("fiajb,fa,fb->fij", C, N, N)
+
+
+def impedance(C, N, rho0, inverse=False):
+    """Z = sqrt(rho0 A_N) (or its inverse), (nf, d, d); fails loudly where A_N is not positive."""
+    omega, Y = np.linalg.eigh(acoustic_tensor(C, N))
+    if not np.all(omega > 0):
+        bad = int(np.flatnonzero(np.any(omega <= 0, axis=1))[0])
+        raise InstabilityError(f"loss of hyperbolicity: acoustic tensor not positive definite at face {bad}")
+    z = np.sqrt(rho0[:, None] * omega)
+    if inverse:
+        z = 1.0 / z
+    return np.einsum("fik,fk,fjk->fij", Y, z, Y)
+
+
+def _matvec(A, x):
+    return np.einsum("fij,fj->fi", A, x)
+
+
+def godunov_state(t_L, v_L, t_R, v_R, Z_L, Z_R):
+    """Stationary traction and velocity (t*, v*) of the linearised Riemann problem."""
+    rhs = t_R - t_L + _matvec(Z_L, v_L) + _matvec(Z_R, v_R)
+    v = np.linalg.solve(Z_L + Z_R, rhs[..., None])[..., 0]
+    return t_L + _matvec(Z_L, v - v_L), v
+
+
+def godunov_state_eigen(P_L, v_L, P_R, v_R, C_L, C_R, rho_L, rho_R, N):
+    """Reference path: Q* = Q_L + sum over left-going waves, from a full eigen-decomposition.
+
+    Builds the quasi-linear Jacobian A_N(Q) of [L23 eq 11-12] on each side, takes the left-going
+    eigenvectors of side L, the right-going of side R and the (material-independent) stationary
+    ones, and solves Q_R - Q_L = sum_m delta_m r_m [R18 eq 32-33]. Slow; used by the tests.
+    Returns the full Q* = (P* (nf, d, d), v* (nf, d)).
+    """
+    nf, d = v_L.shape
+    nq = d * d + d
+
+    def jacobian(C, rho):
+        A = np.zeros((nf, nq, nq))
+        A[:, : d * d, d * d:] = -np.einsum("fiajb,fb->fiaj", C, N).reshape(nf, d * d, d)
+        A[:, d * d:, : d * d] = -(np.eye(d)[None, :, :, None] * N[:, None, None, :]
+                                  ).reshape(nf, d, d * d) / rho[:, None, None]
+        return A
+
+    def eig(A):
+        lam, R = np.linalg.eig(A)
+        return lam.real, R.real
+
+    lam_L, R_L = eig(jacobian(C_L, rho_L))
+    lam_R, R_R = eig(jacobian(C_R, rho_R))
+    scale = np.abs(np.concatenate([lam_L, lam_R], axis=1)).max(axis=1, keepdims=True)
+    left = lam_L < -1e-8 * scale
+    right = lam_R > 1e-8 * scale
+    zero_L = np.abs(lam_L) <= 1e-8 * scale
+    Q_L = np.concatenate([P_L.reshape(nf, -1), v_L], axis=1)
+    Q_R = np.concatenate([P_R.reshape(nf, -1), v_R], axis=1)
+    out = np.empty_like(Q_L)
+    for f in range(nf):                       # reference path only: clarity over speed
+        basis = np.concatenate([R_L[f][:, left[f]], R_L[f][:, zero_L[f]], R_R[f][:, right[f]]], axis=1)
+        delta = np.linalg.solve(basis, Q_R[f] - Q_L[f])
+        n_left = left[f].sum()
+        out[f] = Q_L[f] + basis[:, :n_left] @ delta[:n_left]
+    return out[:, : d * d].reshape(nf, d, d), out[:, d * d:]
+
+
+def transverse_positive(w_F, w_p, C, n, rho0):
+    """B+_n w: the part of a flux fluctuation w = [w_F (nf, d, d), w_p (nf, d)] carried by the
+    waves moving along +n, times their speeds [R18 eq 35-36].
+
+    With g = (C : w_F) n and Z = sqrt(rho0 A_n), decomposing w on the eigenvectors
+    r_k = [Y_k (x) n ; -rho0 c_k Y_k] of d F_n / dU gives the closed form
+    B+ w = [ (Z^-1 g - w_p / rho0) / 2 (x) n ;  -g / 2 + Z w_p / (2 rho0) ].
+    """
+    g = np.einsum("fiajb,fjb,fa->fi", C, w_F, n)
+    Z = impedance(C, n, rho0)
+    Zinv = impedance(C, n, rho0, inverse=True)
+    a = 0.5 * (_matvec(Zinv, g) - w_p / rho0[:, None])
+    return a[:, :, None] * n[:, None, :], -0.5 * g + 0.5 * _matvec(Z, w_p) / rho0[:, None]

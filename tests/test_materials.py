@@ -1,0 +1,195 @@
+"""Constitutive laws: analytic tangents and stresses against finite differences and closed forms."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from skdgmpm.errors import InputError
+from skdgmpm.materials import (LAWS, LinearElastic, Material, NeoHookean, SaintVenantKirchhoff,
+                               make_material)
+
+PARAMS = dict(E=2.0, nu=0.3, rho=1.5)
+ALL = [LinearElastic, SaintVenantKirchhoff, NeoHookean]
+HYPERELASTIC = [SaintVenantKirchhoff, NeoHookean]
+I3 = np.eye(3)
+
+
+def random_F(scale, n=6, seed=0):
+    """``n`` deformation gradients I + scale * noise with det F > 0.2, shape (n, 3, 3)."""
+    rng = np.random.default_rng(seed)
+    F = I3 + scale * rng.standard_normal((8 * n, 3, 3))
+    return F[np.linalg.det(F) > 0.2][:n]
+
+
+def rotation(seed=1):
+    q, r = np.linalg.qr(np.random.default_rng(seed).standard_normal((3, 3)))
+    q = q * np.sign(np.diag(r))
+    return q * np.linalg.det(q)  # proper rotation
+
+
+def central_difference(f, F, h=1e-6):
+    """d f / dF[j, b] by central differences, stacked as the last two axes."""
+    columns = []
+    for j in range(3):
+        for b in range(3):
+            dF = np.zeros((3, 3))
+            dF[j, b] = h
+            columns.append((f(F + dF) - f(F - dF)) / (2 * h))
+    D = np.stack(columns, axis=-1)
+    return D.reshape(D.shape[:-1] + (3, 3))
+
+
+def isotropic_tensor(lam, mu):
+    d = I3
+    return (lam * np.einsum("ia,jb->iajb", d, d)
+            + mu * (np.einsum("ij,ab->iajb", d, d) + np.einsum("ib,aj->iajb", d, d)))
+
+
+@pytest.mark.parametrize("law", ALL)
+@pytest.mark.parametrize("scale", [0.01, 0.35], ids=["small", "large"])
+def test_tangent_matches_finite_differences(law, scale):
+    mat, F = law(**PARAMS), random_F(scale)
+    C, C_fd = mat.tangent(F), central_difference(mat.first_piola, F)
+    assert np.max(np.abs(C - C_fd)) <= 1e-6 * np.max(np.abs(C))
+
+
+@pytest.mark.parametrize("law", ALL)
+@pytest.mark.parametrize("scale", [0.01, 0.35], ids=["small", "large"])
+def test_piola_is_energy_gradient(law, scale):
+    mat, F = law(**PARAMS), random_F(scale, seed=2)
+    P, P_fd = mat.first_piola(F), central_difference(mat.energy, F)
+    assert np.max(np.abs(P - P_fd)) <= 1e-6 * np.max(np.abs(P))
+
+
+@pytest.mark.parametrize("law", ALL)
+def test_reference_state_is_stress_free_with_isotropic_tangent(law):
+    mat = law(**PARAMS)
+    np.testing.assert_allclose(mat.first_piola(I3), 0.0, atol=1e-14)
+    np.testing.assert_allclose(mat.energy(I3), 0.0, atol=1e-14)
+    np.testing.assert_allclose(mat.tangent(I3), isotropic_tensor(mat.lam, mat.mu), atol=1e-14)
+
+
+def test_elastic_constants():
+    mat = LinearElastic(E=210e9, nu=0.25, rho=7800.0)
+    assert mat.lam == pytest.approx(84e9) and mat.mu == pytest.approx(84e9)
+    assert mat.bulk == pytest.approx(mat.lam + 2 * mat.mu / 3)
+
+
+def test_svk_uniaxial_strain_stress():
+    """[R18 eq A.5]: P11 = (lam + 2 mu)/2 F (F^2 - 1), P22 = P33 = lam/2 (F^2 - 1)."""
+    mat, f = SaintVenantKirchhoff(**PARAMS), np.linspace(0.6, 1.5, 7)
+    F = np.zeros((f.size, 3, 3))
+    F[:, 0, 0], F[:, 1, 1], F[:, 2, 2] = f, 1.0, 1.0
+    P = mat.first_piola(F)
+    np.testing.assert_allclose(P[:, 0, 0], (mat.lam + 2 * mat.mu) / 2 * f * (f**2 - 1))
+    np.testing.assert_allclose(P[:, 1, 1], mat.lam / 2 * (f**2 - 1))
+    np.testing.assert_allclose(P[:, 2, 2], mat.lam / 2 * (f**2 - 1))
+    np.testing.assert_allclose(P[:, 0, 1:], 0.0, atol=1e-15)
+
+
+@pytest.mark.parametrize("law", ALL)
+def test_wave_speeds_at_rest(law):
+    mat = law(**PARAMS)
+    cp, cs = np.sqrt((mat.lam + 2 * mat.mu) / mat.rho), np.sqrt(mat.mu / mat.rho)
+    N = np.array([0.48, 0.6, 0.64])  # unit
+    np.testing.assert_allclose(mat.wave_speeds(I3, N), [cp, cs, cs])
+    np.testing.assert_allclose(mat.wave_speeds(I3, N[:2] / np.linalg.norm(N[:2])), [cp, cs])
+    np.testing.assert_allclose(mat.wave_speeds(I3, [1.0]), [cp])
+    assert mat.max_wave_speed(I3, N) == pytest.approx(cp)
+    assert mat.is_hyperbolic(I3, N)
+
+
+def uniaxial(f):
+    F = np.broadcast_to(I3, np.shape(f) + (3, 3)).copy()
+    F[..., 0, 0] = f
+    return F
+
+
+def test_svk_longitudinal_speed():
+    """c(F) = sqrt((lam + 2 mu)(3 F^2 - 1) / (2 rho)) for F = diag(F, 1, 1) [R18 App. A]."""
+    mat, f = SaintVenantKirchhoff(**PARAMS), np.linspace(0.7, 1.5, 9)
+    c = np.sqrt((mat.lam + 2 * mat.mu) * (3 * f**2 - 1) / (2 * mat.rho))
+    np.testing.assert_allclose(mat.wave_speeds(uniaxial(f), [1.0])[:, 0], c)
+    np.testing.assert_allclose(mat.max_wave_speed(uniaxial(f), [1.0, 0.0, 0.0]), c)
+
+
+def test_svk_hyperbolicity_lost_in_compression():
+    """1D: hyperbolic iff F > 1/sqrt(3) [R18 eq A.10]; the 3D shear waves go first."""
+    mat, f = SaintVenantKirchhoff(**PARAMS), np.array([0.3, 0.5, 0.57, 0.58, 0.7, 1.0, 2.0])
+    np.testing.assert_array_equal(mat.is_hyperbolic(uniaxial(f), [1.0]), f > 1 / np.sqrt(3))
+    np.testing.assert_array_equal(mat.wave_speeds(uniaxial(f), [1.0])[:, 0] == 0.0,
+                                  f < 1 / np.sqrt(3))
+    f_shear = np.sqrt(mat.lam / (mat.lam + 2 * mat.mu))  # transverse speed vanishes
+    e1 = [1.0, 0.0, 0.0]
+    assert mat.is_hyperbolic(uniaxial(f_shear + 1e-3), e1)
+    assert not mat.is_hyperbolic(uniaxial(f_shear - 1e-3), e1)
+
+
+@pytest.mark.parametrize("law", HYPERELASTIC)
+def test_frame_invariance(law):
+    mat, F, R = law(**PARAMS), random_F(0.35, seed=3), rotation()
+    np.testing.assert_allclose(mat.first_piola(R @ F), R @ mat.first_piola(F), atol=1e-12)
+    np.testing.assert_allclose(mat.energy(R @ F), mat.energy(F), atol=1e-12)
+    sigma = mat.cauchy(F)
+    np.testing.assert_allclose(sigma, np.swapaxes(sigma, -1, -2), atol=1e-12)
+
+
+@pytest.mark.filterwarnings("error")
+def test_neo_hookean_inverted_is_flagged_without_nan():
+    mat = NeoHookean(**PARAMS)
+    F = np.stack([np.diag([-0.5, 1.0, 1.0]), np.diag([0.0, 1.0, 1.0]), np.diag([0.5, 1.0, 1.0])])
+    N = [1.0, 0.0, 0.0]
+    assert np.isfinite(mat.first_piola(F)).all() and np.isfinite(mat.tangent(F)).all()
+    np.testing.assert_array_equal(mat.energy(F)[:2], np.inf)
+    np.testing.assert_array_equal(mat.is_hyperbolic(F, N), [False, False, True])
+    assert np.isfinite(mat.wave_speeds(F, N)).all()
+
+
+def test_batched_shapes():
+    mat, F = NeoHookean(**PARAMS), random_F(0.1, n=20).reshape(4, 5, 3, 3)
+    N = np.random.default_rng(4).standard_normal((4, 5, 3))
+    assert mat.first_piola(F).shape == (4, 5, 3, 3) and mat.cauchy(F).shape == (4, 5, 3, 3)
+    assert mat.tangent(F).shape == (4, 5, 3, 3, 3, 3) and mat.energy(F).shape == (4, 5)
+    assert mat.acoustic_tensor(F, N).shape == (4, 5, 3, 3)
+    assert mat.acoustic_tensor(F, N[0, 0]).shape == (4, 5, 3, 3)
+    assert mat.wave_speeds(F, N).shape == (4, 5, 3) and mat.max_wave_speed(F, N).shape == (4, 5)
+    assert mat.is_hyperbolic(F, N).dtype == bool and mat.is_hyperbolic(F, N).shape == (4, 5)
+    c = mat.wave_speeds(F, N)
+    assert (np.diff(c, axis=-1) <= 0).all()
+    # a batch gives the same numbers as one point at a time
+    np.testing.assert_allclose(mat.tangent(F)[2, 3], mat.tangent(F[2, 3]))
+    assert mat.energy(I3).shape == () and LinearElastic(**PARAMS).tangent(F).shape[:2] == (4, 5)
+
+
+@pytest.mark.parametrize("law", ALL)
+def test_materials_are_immutable_and_keyword_only(law):
+    mat = law(**PARAMS)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        mat.E = 3.0
+    with pytest.raises(TypeError):
+        law(2.0, 0.3, 1.5)
+    assert isinstance(mat, Material) and mat == law(**PARAMS)
+
+
+@pytest.mark.parametrize("name, value", [("E", 0.0), ("E", -1.0), ("E", np.nan), ("E", "2"),
+                                         ("nu", 0.5), ("nu", -1.0), ("nu", np.inf),
+                                         ("rho", 0.0), ("rho", True)])
+def test_bad_parameters_raise_input_error(name, value):
+    with pytest.raises(InputError, match=rf"^material: {name} = .*must be") as info:
+        NeoHookean(**{**PARAMS, name: value})
+    assert "\n" not in str(info.value)
+
+
+def test_make_material_by_name():
+    assert set(LAWS) == {"linear_elastic", "saint_venant_kirchhoff", "neo_hookean"}
+    for name, cls in LAWS.items():
+        assert make_material(name, **PARAMS) == cls(**PARAMS)
+    assert isinstance(make_material("svk", **PARAMS), SaintVenantKirchhoff)
+    with pytest.raises(InputError, match="known laws: .*linear_elastic.*neo_hookean") as info:
+        make_material("mooney", **PARAMS)
+    assert "\n" not in str(info.value)
+    with pytest.raises(InputError, match="'density'"):
+        make_material("neo_hookean", E=2.0, nu=0.3, density=1.0)
+    with pytest.raises(InputError, match="rho"):
+        make_material("neo_hookean", E=2.0, nu=0.3)
