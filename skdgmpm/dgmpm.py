@@ -29,9 +29,10 @@ class ParticleState:
     Q: np.ndarray          # (n, d*d + d)
     x: np.ndarray          # (n, d)
     step: int = 0
+    speed: np.ndarray = None   # (n,) fastest wave speed along the grid axes
 
     def copy(self):
-        return ParticleState(self.t, self.U.copy(), self.Q.copy(), self.x.copy(), self.step)
+        return ParticleState(self.t, self.U.copy(), self.Q.copy(), self.x.copy(), self.step, self.speed)
 
 
 @dataclass
@@ -155,9 +156,7 @@ class DGMPM:
 
     def time_step(self, state, dt_max=np.inf):
         """(b) Delta t = CFL h_min / c_max from the current fastest wave [R18 §5(b)]."""
-        F, _ = system.split(state.U, self.d)
-        speed, _ = self.materials.max_speed(F, self.particles.material)
-        return min(self.cfl * self.h_min / speed.max(), dt_max)
+        return min(self.cfl * self.h_min / state.speed.max(), dt_max)
 
     def volume_flux(self, grid_state):
         """(c) sum_alpha K^alpha F_alpha(Q)."""
@@ -287,11 +286,12 @@ class DGMPM:
         return new
 
     def check(self, state):
-        """Stop on non-finite values or lost hyperbolicity, naming the particle."""
+        """Stop on non-finite values or lost hyperbolicity, naming the particle; sets the wave
+        speeds of ``state`` used by the next time step."""
         finite = np.all(np.isfinite(state.U), axis=1) & np.all(np.isfinite(state.Q), axis=1)
         F, _ = system.split(state.U, self.d)
-        _, hyperbolic = self.materials.max_speed(np.where(finite[:, None, None], F, np.eye(self.d)),
-                                                 self.particles.material)
+        state.speed, hyperbolic = self.materials.max_speed(
+            np.where(finite[:, None, None], F, np.eye(self.d)), self.particles.material)
         bad = ~finite | ~hyperbolic
         if bad.any():
             p = int(np.flatnonzero(bad)[0])

@@ -17,18 +17,41 @@ from .errors import InstabilityError
 
 def acoustic_tensor(C, N):
     """A_ij = C_iajb N_a N_b: (nf, d, d)."""
-    return np.einsum("fiajb,fa,fb->fij", C, N, N)
+    return np.einsum("fiaj,fa->fij", np.einsum("fiajb,fb->fiaj", C, N), N)
+
+
+def _not_hyperbolic(bad):
+    face = int(np.flatnonzero(bad)[0])
+    raise InstabilityError(f"loss of hyperbolicity: acoustic tensor not positive definite at face {face}")
 
 
 def impedance(C, N, rho0, inverse=False):
-    """Z = sqrt(rho0 A_N) (or its inverse), (nf, d, d); fails loudly where A_N is not positive."""
-    omega, Y = np.linalg.eigh(acoustic_tensor(C, N))
+    """Z = sqrt(rho0 A_N) (or its inverse), (nf, d, d); fails loudly where A_N is not positive.
+
+    d = 1, 2 in closed form (sqrt(M) = (M + s I) / sqrt(tr M + 2 s), s = sqrt(det M)),
+    otherwise by eigen-decomposition.
+    """
+    M = rho0[:, None, None] * acoustic_tensor(C, N)
+    d = M.shape[1]
+    if d == 1:
+        if not np.all(M > 0):
+            _not_hyperbolic(M[:, 0, 0] <= 0)
+        return 1.0 / np.sqrt(M) if inverse else np.sqrt(M)
+    if d == 2:
+        det = M[:, 0, 0] * M[:, 1, 1] - M[:, 0, 1] * M[:, 1, 0]
+        tr = M[:, 0, 0] + M[:, 1, 1]
+        if not np.all((det > 0) & (tr > 0)):
+            _not_hyperbolic(~((det > 0) & (tr > 0)))
+        s = np.sqrt(det)
+        Z = (M + s[:, None, None] * np.eye(2)) / np.sqrt(tr + 2 * s)[:, None, None]
+        if not inverse:
+            return Z
+        adj = np.stack([np.stack([Z[:, 1, 1], -Z[:, 0, 1]], 1), np.stack([-Z[:, 1, 0], Z[:, 0, 0]], 1)], 1)
+        return adj / (Z[:, 0, 0] * Z[:, 1, 1] - Z[:, 0, 1] * Z[:, 1, 0])[:, None, None]
+    omega, Y = np.linalg.eigh(M)
     if not np.all(omega > 0):
-        bad = int(np.flatnonzero(np.any(omega <= 0, axis=1))[0])
-        raise InstabilityError(f"loss of hyperbolicity: acoustic tensor not positive definite at face {bad}")
-    z = np.sqrt(rho0[:, None] * omega)
-    if inverse:
-        z = 1.0 / z
+        _not_hyperbolic(np.any(omega <= 0, axis=1))
+    z = 1.0 / np.sqrt(omega) if inverse else np.sqrt(omega)
     return np.einsum("fik,fk,fjk->fij", Y, z, Y)
 
 

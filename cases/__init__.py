@@ -1,0 +1,1 @@
+"""Scenes shipped with skdgmpm (TOML files and their mesh files)."""

@@ -1,0 +1,43 @@
+"""Write the mesh files shipped with the scenes (gmsh 2.2 through meshio, named boundaries).
+
+    python cases/make_meshes.py
+
+A mesh for a new scene can come from gmsh directly: quads (``Mesh.RecombineAll = 1``) with
+physical line groups for the boundaries the scene's ``[bc.NAME]`` tables refer to.
+"""
+from pathlib import Path
+
+import meshio
+import numpy as np
+
+
+def plate(path, lx=4.0, ly=3.0, nx=33, ny=25, impact=1.0):
+    """Rectangular plate [0, lx] x [0, ly]; boundaries impact (left, y <= impact), left (rest),
+    bottom, right, top."""
+    x, y = np.linspace(0, lx, nx + 1), np.linspace(0, ly, ny + 1)
+    X, Y = np.meshgrid(x, y)
+    points = np.column_stack([X.ravel(), Y.ravel()])
+    n = np.arange(points.shape[0]).reshape(ny + 1, nx + 1)
+    quads = np.column_stack([n[:-1, :-1].ravel(), n[:-1, 1:].ravel(), n[1:, 1:].ravel(), n[1:, :-1].ravel()])
+    lines = {
+        "bottom": np.column_stack([n[0, :-1], n[0, 1:]]),
+        "right": np.column_stack([n[:-1, -1], n[1:, -1]]),
+        "top": np.column_stack([n[-1, 1:], n[-1, :-1]]),
+        "left": np.column_stack([n[1:, 0], n[:-1, 0]]),
+    }
+    left_mid = points[lines["left"]].mean(axis=1)[:, 1]
+    lines["impact"] = lines["left"][left_mid <= impact]
+    lines["left"] = lines["left"][left_mid > impact]
+    names = ["bottom", "right", "top", "left", "impact"]
+    cells = [("line", lines[k]) for k in names] + [("quad", quads)]
+    tags = [np.full(len(lines[k]), i + 1) for i, k in enumerate(names)] + [np.full(len(quads), 10)]
+    field_data = {k: np.array([i + 1, 1]) for i, k in enumerate(names)}
+    field_data["body"] = np.array([10, 2])
+    mesh = meshio.Mesh(points, cells, cell_data={"gmsh:physical": tags, "gmsh:geometrical": tags},
+                       field_data=field_data)
+    meshio.write(path, mesh, file_format="gmsh22", binary=False)
+
+
+if __name__ == "__main__":
+    here = Path(__file__).parent
+    plate(here / "plate_4x3.msh")

@@ -1,0 +1,150 @@
+"""From a `Scene` to a ready stepper: grid, particles, materials, boundary conditions."""
+from dataclasses import dataclass
+
+import numpy as np
+
+from .bcs import make_bc
+from .constitutive import MaterialSet
+from .dgmpm import DGMPM
+from .errors import InputError
+from .grid import Grid, facets_in_box, line, load_mesh, rectangle
+from .particles import Particles, fill_cells, locate, tensor_layout
+from skdgmpm.materials import make_material
+
+
+@dataclass
+class Discretisation:
+    scene: object
+    grid: Grid
+    particles: Particles
+    layout: np.ndarray           # parent coordinates of the per-cell layout (None for a file)
+    stepper: object
+    initial: object
+
+
+def build_mesh(scene):
+    g = scene.data["grid"]
+    d = scene.dim
+    if "mesh" in g:
+        mesh = load_mesh(scene.resolve(g["mesh"]))
+        if mesh.dim() != d:
+            raise InputError(f"{scene.where('grid.mesh')} = {g['mesh']!r} is {mesh.dim()}D but dim = {d}")
+    elif d == 1:
+        length, cells = _positive(scene, "grid.length"), _count(scene, "grid.cells", 1)[0]
+        mesh = line(length, cells, float(np.atleast_1d(g.get("origin", 0.0))[0]))
+    else:
+        size = g.get("size")
+        if not (isinstance(size, list) and len(size) == 2 and all(_number(s) and s > 0 for s in size)):
+            raise InputError(f"{scene.where('grid.size')} = {size!r} must be two lengths > 0 (m)")
+        nx, ny = _count(scene, "grid.cells", 2)
+        mesh = rectangle(size[0], size[1], nx, ny, tuple(g.get("origin", (0.0, 0.0))))
+    extra = {}
+    for name, spec in (scene.get("boundaries") or {}).items():
+        if not isinstance(spec, dict) or not isinstance(spec.get("box"), dict):
+            raise InputError(f"{scene.where(f'boundaries.{name}')} needs box = {{x = [lo, hi], ...}}")
+        extra[name] = facets_in_box(mesh, spec["box"])
+        if len(extra[name]) == 0:
+            raise InputError(f"{scene.where(f'boundaries.{name}.box')} = {spec['box']!r} holds no boundary facet")
+    if extra:
+        mesh = mesh.with_boundaries({**(mesh.boundaries or {}), **extra})
+    return mesh
+
+
+def active_cells(scene, mesh):
+    body = scene.get("body") or {}
+    if "subdomain" in body:
+        subs = mesh.subdomains or {}
+        if body["subdomain"] not in subs:
+            raise InputError(f"{scene.where('body.subdomain')} = {body['subdomain']!r} is not in the mesh "
+                             f"(known: {', '.join(subs) or 'none'})")
+        return np.asarray(subs[body["subdomain"]])
+    cells = np.arange(mesh.nelements)
+    if "box" in body:
+        centre = mesh.p[:, mesh.t].mean(axis=1)
+        keep = np.ones(mesh.nelements, dtype=bool)
+        for axis, key in enumerate("xy"[: mesh.dim()]):
+            if key in body["box"]:
+                lo, hi = body["box"][key]
+                keep &= (centre[axis] >= lo) & (centre[axis] <= hi)
+        cells = cells[keep]
+        if len(cells) == 0:
+            raise InputError(f"{scene.where('body.box')} = {body['box']!r} holds no cell")
+    return cells
+
+
+def build(scene):
+    """Validate and discretise a scene: raises InputError before anything is computed."""
+    d = scene.dim
+    mesh = build_mesh(scene)
+    mat_spec = dict(scene.data["material"])
+    law = mat_spec.pop("law", "linear_elastic")
+    try:
+        material = make_material(law, **mat_spec)
+    except InputError as exc:
+        raise InputError(f"{scene.where('material')}: {exc}") from None
+
+    pspec = scene.get("particles") or {}
+    if "file" in pspec:
+        X = _read_points(scene, pspec["file"], d)
+        cell_full, _ = locate(mesh, X, source=str(scene.resolve(pspec["file"])))
+        grid = Grid(mesh, np.unique(cell_full))
+        cell, xi = locate(grid.submesh, X, source=str(scene.resolve(pspec["file"])))
+        volume = grid.cell_volumes()[cell] / np.bincount(cell)[cell]
+        layout = None
+    else:
+        grid = Grid(mesh, active_cells(scene, mesh))
+        layout = tensor_layout(pspec.get("per_cell", 1), d)
+        X, xi, cell, volume = fill_cells(grid.submesh, np.arange(grid.submesh.nelements), layout,
+                                         grid.cell_volumes())
+    n = len(X)
+    particles = Particles(X, xi, cell, volume, np.full(n, material.rho), np.zeros(n, dtype=np.int64))
+
+    bcs = [(name, make_bc(spec, d, scene.where(f"bc.{name}")))
+           for name, spec in (scene.get("bc") or {}).items()]
+    method = scene.data["method"]
+    cfl = float(method.get("cfl", 1.0))
+    if not 0 < cfl <= 2:
+        raise InputError(f"{scene.where('method.cfl')} = {cfl!r} must be in (0, 2]")
+    stepper = DGMPM(grid, particles, MaterialSet((material,)), bcs, cfl=cfl,
+                    integrator=method.get("integrator", "euler"),
+                    transverse=method.get("transverse", "dcu"))
+    init = scene.get("initial") or {}
+    v0 = np.asarray(init.get("velocity", [0.0] * d), dtype=float)
+    F0 = np.asarray(init.get("F", np.eye(d).tolist()), dtype=float)
+    if v0.shape != (d,) or F0.shape != (d, d):
+        raise InputError(f"{scene.where('initial')}: velocity must have {d} and F {d}x{d} entries")
+    initial = stepper.initial_state(np.broadcast_to(F0, (n, d, d)).copy(),
+                                    np.broadcast_to(v0, (n, d)).copy())
+    return Discretisation(scene, grid, particles, layout, stepper, initial)
+
+
+def _read_points(scene, name, d):
+    path = scene.resolve(name)
+    if not path.is_file():
+        raise InputError(f"{scene.where('particles.file')} = {name!r}: file not found")
+    try:
+        X = np.loadtxt(path, delimiter=",", ndmin=2)
+    except ValueError as exc:
+        raise InputError(f"{path}: cannot read particle coordinates ({exc})") from None
+    if X.shape[1] != d:
+        raise InputError(f"{path}: particle coordinates need {d} column(s), got {X.shape[1]}")
+    return X
+
+
+def _number(x):
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x)
+
+
+def _positive(scene, key):
+    value = scene.get(key)
+    if not (_number(value) and value > 0):
+        raise InputError(f"{scene.where(key)} = {value!r} must be a number > 0")
+    return float(value)
+
+
+def _count(scene, key, d):
+    value = scene.get(key)
+    values = value if isinstance(value, list) else [value]
+    if len(values) != d or not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in values):
+        raise InputError(f"{scene.where(key)} = {value!r} must be {d} positive integer(s)")
+    return values

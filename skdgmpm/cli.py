@@ -1,0 +1,85 @@
+"""Command line: ``skdgmpm run | list | stability``."""
+import argparse
+import json
+import sys
+import warnings
+
+from .errors import InputError
+
+
+def _cmd_run(args):
+    from .run import run
+
+    out = args.out if args.out is not None else f"runs/{_stem(args.case)}"
+    result = run(args.case, overrides=args.set, out=out, force=args.force, progress=not args.quiet)
+    summary = result.summary()
+    print(f"{summary['case']}: {summary['status']}, {summary['steps']} steps to t = "
+          f"{summary['t_end']:.6g} s in {summary['wall_s']:.2f} s -> {out}")
+    for name, norms in summary.get("errors", {}).items():
+        print(f"  {name:>6}: L1_rel {norms['L1_rel']:.3e}  L2_rel {norms['L2_rel']:.3e}  "
+              f"Linf {norms['Linf']:.3e}")
+    if result.status != "ok":
+        print(f"error: {result.message}; last good state kept in {out}", file=sys.stderr)
+        return 3
+    return 0
+
+
+def _stem(case):
+    from pathlib import Path
+    return Path(case).stem
+
+
+def _cmd_list(args):
+    from .scene import list_scenes, load_scene
+
+    for name, path in list_scenes().items():
+        scene = load_scene(path)
+        print(f"{name:<28} {scene.dim}D  {scene.get('title', '')}  [{scene.get('reference', '')}]")
+    return 0
+
+
+def _cmd_stability(args):
+    from .stability import analyse, parse_layout
+
+    layout = parse_layout(args.layout)
+    report = analyse(layout)
+    print(report.format())
+    if args.json:
+        print(json.dumps(report.__dict__, default=list))
+    return 0
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog="skdgmpm", description="DGMPM solver for impacts on solids")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("run", help="run a scene")
+    p.add_argument("case", help="scene name from cases/ (see 'skdgmpm list') or path to a .toml")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scene key, e.g. --set method.cfl=0.5 (repeatable)")
+    p.add_argument("--out", default=None, help="output directory (default runs/CASE)")
+    p.add_argument("--force", action="store_true", help="replace an existing output directory")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_run)
+
+    p = sub.add_parser("list", help="list the scenes")
+    p.set_defaults(func=_cmd_list)
+
+    p = sub.add_parser("stability", help="1D von Neumann analysis of a particle layout (R18 §6)")
+    p.add_argument("--layout", required=True, help="parent coordinates in a cell, e.g. 0.25,0.75")
+    p.add_argument("--json", action="store_true", help="also print the report as JSON")
+    p.set_defaults(func=_cmd_stability)
+
+    args = parser.parse_args(argv)
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        warnings.formatwarning = lambda msg, cat, *a, **k: f"warning: {msg}\n"
+        try:
+            return args.func(args)
+        except InputError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

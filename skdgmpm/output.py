@@ -1,0 +1,89 @@
+"""Run outputs: ParaView-readable VTK time series (via meshio), energy.csv, summary.json."""
+import csv
+import json
+from pathlib import Path
+from xml.sax.saxutils import quoteattr
+
+import meshio
+import numpy as np
+
+from . import system
+
+
+def particle_fields(stepper, state):
+    """Named particle arrays at a state: F_ij, P_ij, v_i, sigma_ij (Cauchy, 3x3), x_i."""
+    d = stepper.d
+    F, p = system.split(state.U, d)
+    P, v = system.split(state.Q, d)
+    sigma = stepper.materials.cauchy(F, stepper.particles.material)
+    out = {}
+    for i in range(d):
+        out[f"v{i + 1}"] = v[:, i]
+        out[f"x{i + 1}"] = state.x[:, i]
+        for a in range(d):
+            out[f"F{i + 1}{a + 1}"] = F[:, i, a]
+            out[f"P{i + 1}{a + 1}"] = P[:, i, a]
+    for i in range(3):
+        for j in range(i, 3):
+            out[f"sigma{i + 1}{j + 1}"] = sigma[:, i, j]
+    return out
+
+
+def _pad3(a):
+    out = np.zeros((len(a), 3))
+    out[:, : a.shape[1]] = a
+    return out
+
+
+def _tensor9(T):
+    n, d, _ = T.shape
+    out = np.zeros((n, 3, 3))
+    out[:, :d, :d] = T
+    return out.reshape(n, 9)
+
+
+def write_particles(path, stepper, state):
+    """Particles at their current positions with U, Q, Cauchy stress and reference position."""
+    d = stepper.d
+    F, p = system.split(state.U, d)
+    P, v = system.split(state.Q, d)
+    sigma = stepper.materials.cauchy(F, stepper.particles.material)
+    n = len(state.x)
+    data = {
+        "F": _tensor9(F), "P": _tensor9(P), "cauchy": sigma.reshape(n, 9),
+        "velocity": _pad3(v), "momentum": _pad3(p), "X": _pad3(stepper.particles.X),
+        "volume": stepper.particles.volume, "material": stepper.particles.material.astype(float),
+    }
+    mesh = meshio.Mesh(_pad3(state.x), [("vertex", np.arange(n)[:, None])], point_data=data)
+    mesh.write(path)
+
+
+def write_grid(path, grid):
+    """The full background grid, with the active cells flagged."""
+    m = grid.mesh
+    kind = "line" if m.dim() == 1 else "quad"
+    active = np.zeros(m.nelements)
+    active[grid.active] = 1.0
+    meshio.Mesh(_pad3(m.p.T), [(kind, m.t.T)], cell_data={"active": [active]}).write(path)
+
+
+def write_pvd(path, entries):
+    """ParaView collection: ``entries`` = [(time, relative file name)]."""
+    lines = ['<?xml version="1.0"?>',
+             '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">', "  <Collection>"]
+    lines += [f'    <DataSet timestep="{t:.9e}" part="0" file={quoteattr(f)}/>' for t, f in entries]
+    lines += ["  </Collection>", "</VTKFile>", ""]
+    Path(path).write_text("\n".join(lines))
+
+
+def write_energy(path, history):
+    keys = list(history)
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(keys)
+        for row in zip(*(history[k] for k in keys)):
+            w.writerow([f"{x:.12g}" if isinstance(x, float) else x for x in row])
+
+
+def write_summary(path, summary):
+    Path(path).write_text(json.dumps(summary, indent=2, default=float) + "\n")

@@ -1,0 +1,216 @@
+"""Run a scene: time loop with progress, energy history, error norms, outputs on disk."""
+import functools
+import shutil
+import sys
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import output
+from .build import build
+from .errors import InputError, InstabilityError
+from .exact import error_norms
+from .scene import Scene, exact_solution, load_scene
+
+
+@functools.lru_cache(maxsize=32)
+def _critical_cfl(layout, integrator):
+    from .stability import critical_cfl
+    return critical_cfl(list(layout), integrator, criterion="spectral")
+
+
+def check_cfl(disc):
+    """Warn when the CFL exceeds the von Neumann limit of the particle layout (R18 §6).
+
+    The 1D analysis applies per direction; in 2D it is an upper bound (DCU needs less).
+    Returns the limit, or None where the layout is not a regular per-cell layout.
+    """
+    if disc.layout is None:
+        return None
+    stepper = disc.stepper
+    coords = tuple(np.unique(np.round(disc.layout[:, 0], 12)))
+    limit = _critical_cfl(coords, stepper.integrator)
+    if stepper.cfl > limit + 1e-6:
+        warnings.warn(f"{disc.scene.where('method.cfl')} = {stepper.cfl} exceeds the von Neumann "
+                      f"limit {limit:.2f} of layout {list(coords)} with {stepper.integrator} "
+                      f"(skdgmpm stability --layout ...)", stacklevel=3)
+    return limit
+
+
+@dataclass
+class Result:
+    """A finished (or stopped) run: final state, history, frames, errors and summary."""
+
+    scene: Scene
+    disc: object
+    state: object
+    history: dict
+    frames: list
+    errors: dict
+    wall_s: float
+    status: str = "ok"
+    message: str = ""
+    out: Path = None
+    exact: object = field(default=None, repr=False)
+
+    @property
+    def stepper(self):
+        return self.disc.stepper
+
+    @property
+    def X(self):
+        return self.disc.particles.X
+
+    def fields(self, state=None):
+        return output.particle_fields(self.stepper, state or self.state)
+
+    def summary(self):
+        s, st = self.scene, self.stepper
+        method = s.data["method"]
+        out = {
+            "case": s.name, "title": s.get("title", ""), "method": method.get("name", "dgmpm"),
+            "order": 1, "integrator": st.integrator, "transverse": st.transverse,
+            "cfl": st.cfl, "dim": s.dim, "cells": int(st.grid.submesh.nelements),
+            "grid_cells": int(st.grid.mesh.nelements), "particles": len(self.disc.particles),
+            "dofs": int(st.n_dofs_total), "steps": int(self.state.step), "t_end": float(self.state.t),
+            "wall_s": self.wall_s, "wall_per_step_s": self.wall_s / max(self.state.step, 1),
+            "status": self.status,
+        }
+        if self.message:
+            out["message"] = self.message
+        energy = {k: float(v[-1]) for k, v in self.history.items() if k not in ("step",)}
+        energy["balance_change"] = float(self.history["balance"][-1] - self.history["balance"][0])
+        out["energy"] = energy
+        if self.errors:
+            out["errors"] = self.errors
+        return out
+
+    def __repr__(self):
+        err = ""
+        if self.errors:
+            err = ", " + ", ".join(f"{k} L1={v['L1_rel']:.2e}" for k, v in self.errors.items())
+        return (f"<Result {self.scene.name} {self.summary()['method']}/{self.stepper.integrator}"
+                f"/{self.stepper.transverse} {self.status}: {self.state.step} steps, "
+                f"t={self.state.t:.4g} s, {self.wall_s:.2f} s{err}>")
+
+
+def compute_errors(disc, state, solution):
+    if solution is None:
+        return {}
+    fields = output.particle_fields(disc.stepper, state)
+    exact = solution.fields(disc.particles.X, state.t)
+    return {k: error_norms(fields[k], exact[k], disc.particles.volume)
+            for k in exact if k in fields}
+
+
+def run(scene, overrides=(), out=None, force=False, progress=True, frames=None):
+    """Run ``scene`` (a `Scene`, a name or a path). Writes outputs to ``out`` if given.
+
+    Output is written to ``<out>.partial`` and renamed at the end, so a failed start leaves
+    nothing behind; an existing non-empty ``out`` is an error unless ``force``.
+    """
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene, overrides)
+    elif overrides:
+        scene = scene.with_overrides(overrides)
+    t_end = scene.get("run.t_end")
+    if not (isinstance(t_end, (int, float)) and t_end > 0):
+        raise InputError(f"{scene.where('run.t_end')} = {t_end!r} must be a time > 0 (s)")
+    n_frames = int(frames if frames is not None else scene.get("run.frames", 20))
+    if out is not None:
+        out = Path(out)
+        if out.exists() and any(out.iterdir()) and not force:
+            raise InputError(f"--out {out}: directory exists and is not empty (use --force to replace it)")
+    disc = build(scene)
+    solution = exact_solution(scene)
+    check_cfl(disc)
+    stepper, state = disc.stepper, disc.initial
+
+    partial = None
+    if out is not None:
+        partial = out.with_name(out.name + ".partial")
+        shutil.rmtree(partial, ignore_errors=True)
+        partial.mkdir(parents=True)
+        output.write_grid(partial / "grid.vtu", disc.grid)
+
+    history = {k: [] for k in ("step", "t", "kinetic", "stored", "total", "external_work", "balance")}
+
+    def record(st):
+        kin, sto = stepper.energy(st)
+        for k, v in zip(history, (st.step, st.t, kin, sto, kin + sto, stepper.external_work,
+                                  kin + sto - stepper.external_work)):
+            history[k].append(v)
+
+    frame_list, entries = [], []
+
+    def snapshot(st):
+        frame_list.append(st.copy())
+        if partial is not None:
+            name = f"particles_{len(entries):04d}.vtu"
+            output.write_particles(partial / name, stepper, st)
+            entries.append((st.t, name))
+
+    record(state)
+    snapshot(state)
+    next_frame = 1
+    status, message = "ok", ""
+    bar = _progress(t_end, scene.name, progress)
+    start = time.perf_counter()
+    try:
+        while state.t < t_end * (1 - 1e-12):
+            new = stepper.step(state, t_end - state.t)
+            bar.update(new.t - state.t)
+            state = new
+            record(state)
+            if state.t >= next_frame * t_end / max(n_frames, 1) * (1 - 1e-12):
+                snapshot(state)
+                while next_frame * t_end / max(n_frames, 1) <= state.t * (1 + 1e-12):
+                    next_frame += 1
+    except InstabilityError as exc:
+        status, message = "unstable", str(exc)
+        if frame_list[-1].step != state.step:
+            snapshot(state)                       # the last good state
+    finally:
+        bar.close()
+    wall = time.perf_counter() - start
+    history = {k: np.asarray(v) for k, v in history.items()}
+    result = Result(scene, disc, state, history, frame_list,
+                    compute_errors(disc, state, solution), wall, status, message, out, solution)
+    if partial is not None:
+        output.write_pvd(partial / "particles.pvd", entries)
+        output.write_energy(partial / "energy.csv", history)
+        output.write_summary(partial / "summary.json", result.summary())
+        _plots(result, partial)
+        if out.exists():
+            shutil.rmtree(out)
+        partial.rename(out)
+    return result
+
+
+def _plots(result, folder):
+    try:
+        from . import plots
+    except ImportError:          # matplotlib missing: files are still complete
+        return
+    plots.energy(result, folder / "energy.png")
+    if result.scene.dim == 1 or result.exact is not None:
+        plots.profile(result, folder / "profile.png")
+
+
+class _NoBar:
+    def update(self, _):
+        pass
+
+    def close(self):
+        pass
+
+
+def _progress(total, name, enabled):
+    if not enabled:
+        return _NoBar()
+    from tqdm.auto import tqdm
+    return tqdm(total=total, desc=name, unit="s", file=sys.stderr, leave=False,
+                bar_format="{desc}: {percentage:3.0f}%|{bar}| t={n:.3g}/{total:.3g} s [{elapsed}<{remaining}]")

@@ -1,0 +1,188 @@
+"""Scenes: TOML files that read like a paper's problem statement, with units.
+
+A scene names its grid (generated, or a mesh file read through meshio), material, particles,
+initial state, boundary conditions by boundary name, method, end time, outputs and, when there is
+one, the exact solution. Every key can be overridden (``--set method.cfl=0.5``). See
+``cases/*.toml`` and docs/scenes.md.
+"""
+import copy
+import tomllib
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from . import exact as exact_solutions
+from .errors import InputError
+
+NUMBER = (int, float)
+# key -> expected type(s); a dict is a sub-table; None is a free-form table checked later
+SCHEMA = {
+    "title": str, "reference": str, "dim": int, "description": str,
+    "grid": {"length": NUMBER, "cells": (int, list), "size": list, "origin": (list, NUMBER),
+             "mesh": str},
+    "body": {"box": dict, "subdomain": str},
+    "particles": {"per_cell": (int, list), "file": str},
+    "material": {"law": str, "E": NUMBER, "nu": NUMBER, "rho": NUMBER},
+    "initial": {"velocity": list, "F": list},
+    "boundaries": None,
+    "bc": None,
+    "method": {"name": str, "integrator": str, "transverse": str, "cfl": NUMBER},
+    "run": {"t_end": NUMBER, "frames": int},
+    "exact": None,
+}
+METHODS = ("dgmpm",)
+
+
+def _where(source, key):
+    return f"{source}: {key}" if source else key
+
+
+def _check(table, schema, source, prefix=""):
+    for key, value in table.items():
+        path = f"{prefix}{key}"
+        if key not in schema:
+            known = ", ".join(f"{prefix}{k}" for k in schema)
+            raise InputError(f"{_where(source, path)} is not a known key (known: {known})")
+        expected = schema[key]
+        if isinstance(expected, dict):
+            if not isinstance(value, dict):
+                raise InputError(f"{_where(source, path)} = {value!r} must be a table")
+            _check(value, expected, source, path + ".")
+        elif expected is None:
+            if not isinstance(value, dict):
+                raise InputError(f"{_where(source, path)} = {value!r} must be a table")
+        elif not isinstance(value, expected) or isinstance(value, bool):
+            names = "/".join(t.__name__ for t in np.atleast_1d(expected))
+            raise InputError(f"{_where(source, path)} = {value!r} has the wrong type (expected {names})")
+
+
+def parse_override(text):
+    """'a.b=1e9' -> (['a', 'b'], 1e9); the value is read as TOML, else kept as a string."""
+    if "=" not in text:
+        raise InputError(f"--set {text!r}: expected KEY=VALUE")
+    key, raw = text.split("=", 1)
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw
+    return key.strip().split("."), value
+
+
+def apply_overrides(data, overrides, source="--set"):
+    data = copy.deepcopy(data)
+    for item in overrides:
+        keys, value = parse_override(item) if isinstance(item, str) else item
+        table = data
+        for k in keys[:-1]:
+            table = table.setdefault(k, {})
+            if not isinstance(table, dict):
+                raise InputError(f"{source} {'.'.join(keys)}: {k!r} is not a table")
+        table[keys[-1]] = value
+    return data
+
+
+def scene_dirs():
+    """Where scenes are looked up: ./cases in a checkout, then the installed package."""
+    here = Path.cwd() / "cases"
+    return [d for d in (here, Path(str(resources.files("skdgmpm.cases")))) if d.is_dir()]
+
+
+def list_scenes():
+    seen = {}
+    for d in scene_dirs():
+        for path in sorted(d.glob("*.toml")):
+            seen.setdefault(path.stem, path)
+    return seen
+
+
+def find_scene(name):
+    path = Path(name)
+    if path.suffix == ".toml" or path.exists():
+        if not path.is_file():
+            raise InputError(f"{name}: scene file not found")
+        return path
+    scenes = list_scenes()
+    if name not in scenes:
+        raise InputError(f"scene {name!r} is unknown (known: {', '.join(scenes)})")
+    return scenes[name]
+
+
+@dataclass
+class Scene:
+    """A validated scene: the raw tables plus where they came from."""
+
+    name: str
+    data: dict
+    path: Path = None
+
+    def get(self, dotted, default=None):
+        table = self.data
+        for k in dotted.split("."):
+            if not isinstance(table, dict) or k not in table:
+                return default
+            table = table[k]
+        return table
+
+    def where(self, key):
+        return _where(str(self.path) if self.path else self.name, key)
+
+    @property
+    def dim(self):
+        return self.data["dim"]
+
+    def resolve(self, relative):
+        base = self.path.parent if self.path else Path.cwd()
+        return base / relative
+
+    def with_overrides(self, overrides):
+        return Scene.from_dict(apply_overrides(self.data, overrides), self.name, self.path)
+
+    @classmethod
+    def from_dict(cls, data, name="scene", path=None):
+        source = str(path) if path else name
+        _check(data, SCHEMA, source)
+        for key in ("dim", "grid", "material", "method", "run"):
+            if key not in data:
+                raise InputError(f"{_where(source, key)} is missing")
+        if data["dim"] not in (1, 2):
+            raise InputError(f"{_where(source, 'dim')} = {data['dim']!r} must be 1 or 2")
+        if data["method"].get("name", "dgmpm") not in METHODS:
+            raise InputError(f"{_where(source, 'method.name')} = {data['method']['name']!r}: "
+                             f"expected one of {', '.join(METHODS)}")
+        return cls(name, data, path)
+
+
+def load_scene(name, overrides=()):
+    """Load a scene by name (from ``cases/``) or path, apply ``--set`` style overrides."""
+    path = find_scene(str(name))
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{path}: not valid TOML ({exc})") from None
+    scene = Scene.from_dict(data, path.stem, path)
+    return scene.with_overrides(overrides) if overrides else scene
+
+
+def exact_solution(scene):
+    """The scene's exact solution object, its parameters taken from the scene itself."""
+    spec = scene.get("exact")
+    if not spec:
+        return None
+    spec = dict(spec)
+    name = spec.pop("name", None)
+    mat = scene.data["material"]
+    params = {"E": mat.get("E"), "rho": mat.get("rho")}
+    if name == "svk_bar_riemann":
+        params["nu"] = mat.get("nu")
+    if "load" in spec:                                   # P11 = t . N with N = -e1 at the left end
+        bc = scene.get(f"bc.{spec.pop('load')}", {})
+        params["traction"] = -float(np.atleast_1d(bc.get("value", [0.0]))[0])
+    if name == "elastic_bar_step":
+        params["length"] = scene.get("grid.length", scene.get("grid.size", [None])[0])
+    params.update(spec)
+    try:
+        return exact_solutions.make_exact(name, **params)
+    except InputError as exc:
+        raise InputError(f"{scene.where('exact')}: {exc}") from None
