@@ -71,6 +71,12 @@ class BoundaryCondition:
     def star(self, time, t_L, v_L, Z, N):
         raise NotImplementedError
 
+    def constraints(self, N):
+        """Frame (nf, d, d) and which of its velocity / traction components are imposed ((d,)
+        bools each); corrections of the boundary flux may only change the free ones."""
+        d = N.shape[1]
+        return np.broadcast_to(np.eye(d), (len(N), d, d)), np.zeros(d, bool), np.ones(d, bool)
+
 
 @dataclass(frozen=True)
 class Mixed(BoundaryCondition):
@@ -87,6 +93,15 @@ class Mixed(BoundaryCondition):
                            for k in range(d)], dtype=float)
         values = values * a
         return star_state(_frame(N, False), imposes_velocity, values, t_L, v_L, Z)
+
+    def constraints(self, N):
+        d = N.shape[1]
+        v = np.array([AXES[k] in self.velocity for k in range(d)])
+        return _frame(N, False), v, ~v
+
+
+FREE = Mixed()
+"""Traction-free surface: the condition of boundary faces that have none."""
 
 
 def Velocity(value, schedule=Schedule()):
@@ -115,6 +130,10 @@ class NormalVelocity(BoundaryCondition):
         values[0] = self.value * self.schedule(time)
         return star_state(_frame(N, True), imposes_velocity, values, t_L, v_L, Z)
 
+    def constraints(self, N):
+        v = np.arange(N.shape[1]) == 0
+        return _frame(N, True), v, ~v
+
 
 def Symmetry(schedule=Schedule()):
     return NormalVelocity(0.0, schedule=schedule)
@@ -126,6 +145,10 @@ class Transmissive(BoundaryCondition):
 
     def star(self, time, t_L, v_L, Z, N):
         return t_L.copy(), v_L.copy()
+
+    def constraints(self, N):
+        d = N.shape[1]
+        return _frame(N, False), np.zeros(d, bool), np.zeros(d, bool)
 
 
 KINDS = ("velocity", "traction", "free", "symmetry", "normal_velocity", "transmissive", "mixed")

@@ -6,7 +6,7 @@ import numpy as np
 from .bcs import make_bc
 from .constitutive import MaterialSet
 from .dgmpm import DGMPM
-from .errors import InputError
+from .errors import InputError, InstabilityError
 from .grid import Grid, facets_in_box, line, load_mesh, rectangle
 from .particles import Particles, fill_cells, locate, tensor_layout
 from skdgmpm.materials import make_material
@@ -26,22 +26,26 @@ def build_mesh(scene):
     g = scene.data["grid"]
     d = scene.dim
     if "mesh" in g:
-        mesh = load_mesh(scene.resolve(g["mesh"]))
+        path = scene.resolve(g["mesh"])
+        if not path.is_file():
+            raise InputError(f"{scene.where('grid.mesh')} = {g['mesh']!r}: mesh file {path} not found")
+        mesh = load_mesh(path)
         if mesh.dim() != d:
             raise InputError(f"{scene.where('grid.mesh')} = {g['mesh']!r} is {mesh.dim()}D but dim = {d}")
     elif d == 1:
         length, cells = _positive(scene, "grid.length"), _count(scene, "grid.cells", 1)[0]
-        mesh = line(length, cells, float(np.atleast_1d(g.get("origin", 0.0))[0]))
+        mesh = line(length, cells, _origin(scene, 1)[0])
     else:
         size = g.get("size")
         if not (isinstance(size, list) and len(size) == 2 and all(_number(s) and s > 0 for s in size)):
             raise InputError(f"{scene.where('grid.size')} = {size!r} must be two lengths > 0 (m)")
         nx, ny = _count(scene, "grid.cells", 2)
-        mesh = rectangle(size[0], size[1], nx, ny, tuple(g.get("origin", (0.0, 0.0))))
+        mesh = rectangle(size[0], size[1], nx, ny, _origin(scene, 2))
     extra = {}
     for name, spec in (scene.get("boundaries") or {}).items():
         if not isinstance(spec, dict) or not isinstance(spec.get("box"), dict):
             raise InputError(f"{scene.where(f'boundaries.{name}')} needs box = {{x = [lo, hi], ...}}")
+        _check_box(scene, f"boundaries.{name}.box", spec["box"], mesh.dim())
         extra[name] = facets_in_box(mesh, spec["box"])
         if len(extra[name]) == 0:
             raise InputError(f"{scene.where(f'boundaries.{name}.box')} = {spec['box']!r} holds no boundary facet")
@@ -60,6 +64,7 @@ def active_cells(scene, mesh):
         return np.asarray(subs[body["subdomain"]])
     cells = np.arange(mesh.nelements)
     if "box" in body:
+        _check_box(scene, "body.box", body["box"], mesh.dim())
         centre = mesh.p[:, mesh.t].mean(axis=1)
         keep = np.ones(mesh.nelements, dtype=bool)
         for axis, key in enumerate("xy"[: mesh.dim()]):
@@ -80,8 +85,9 @@ def build(scene):
     law = mat_spec.pop("law", "linear_elastic")
     try:
         material = make_material(law, **mat_spec)
-    except InputError as exc:
-        raise InputError(f"{scene.where('material')}: {exc}") from None
+    except InputError as exc:            # the message starts with "material: "
+        message = str(exc).removeprefix("material: ")
+        raise InputError(f"{scene.where('material')}: {message}") from None
 
     pspec = scene.get("particles") or {}
     if "file" in pspec:
@@ -93,28 +99,34 @@ def build(scene):
         layout = None
     else:
         grid = Grid(mesh, active_cells(scene, mesh))
-        layout = tensor_layout(pspec.get("per_cell", 1), d)
+        layout = _layout(scene, pspec.get("per_cell", 1), d)
         X, xi, cell, volume = fill_cells(grid.submesh, np.arange(grid.submesh.nelements), layout,
                                          grid.cell_volumes())
     n = len(X)
     particles = Particles(X, xi, cell, volume, np.full(n, material.rho), np.zeros(n, dtype=np.int64))
 
-    bcs = [(name, make_bc(spec, d, scene.where(f"bc.{name}")))
-           for name, spec in (scene.get("bc") or {}).items()]
+    bcs = [(name, _bc(scene, grid, name, spec, d)) for name, spec in (scene.get("bc") or {}).items()]
     method = scene.data["method"]
     cfl = float(method.get("cfl", 1.0))
     if not 0 < cfl <= 2:
         raise InputError(f"{scene.where('method.cfl')} = {cfl!r} must be in (0, 2]")
+    for key, choices in (("integrator", ("euler", "rk2")), ("transverse", ("dcu", "ctu"))):
+        if key in method and method[key] not in choices:
+            raise InputError(f"{scene.where(f'method.{key}')} = {method[key]!r}: expected one of "
+                             f"{', '.join(choices)}")
     stepper = DGMPM(grid, particles, MaterialSet((material,)), bcs, cfl=cfl,
                     integrator=method.get("integrator", "euler"),
                     transverse=method.get("transverse", "dcu"))
     init = scene.get("initial") or {}
-    v0 = np.asarray(init.get("velocity", [0.0] * d), dtype=float)
-    F0 = np.asarray(init.get("F", np.eye(d).tolist()), dtype=float)
-    if v0.shape != (d,) or F0.shape != (d, d):
-        raise InputError(f"{scene.where('initial')}: velocity must have {d} and F {d}x{d} entries")
-    initial = stepper.initial_state(np.broadcast_to(F0, (n, d, d)).copy(),
-                                    np.broadcast_to(v0, (n, d)).copy())
+    v0 = _array(scene, "initial.velocity", init.get("velocity", [0.0] * d), (d,), f"{d} number(s) (m/s)")
+    F0 = _array(scene, "initial.F", init.get("F", np.eye(d).tolist()), (d, d), f"{d}x{d} numbers")
+    try:
+        with np.errstate(over="ignore", invalid="ignore"):
+            initial = stepper.initial_state(np.broadcast_to(F0, (n, d, d)).copy(),
+                                            np.broadcast_to(v0, (n, d)).copy())
+    except InstabilityError as exc:
+        raise InputError(f"{scene.where('initial')}: the initial state is not admissible "
+                         f"({str(exc).split(' at step')[0]})") from None
     return Discretisation(scene, grid, particles, layout, stepper, initial)
 
 
@@ -129,6 +141,57 @@ def _read_points(scene, name, d):
     if X.shape[1] != d:
         raise InputError(f"{path}: particle coordinates need {d} column(s), got {X.shape[1]}")
     return X
+
+
+def _array(scene, key, value, shape, what):
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        arr = None
+    if arr is None or arr.shape != shape or not np.all(np.isfinite(arr)):
+        raise InputError(f"{scene.where(key)} = {value!r} must be {what}")
+    return arr
+
+
+def _origin(scene, d):
+    value = scene.get("grid.origin", [0.0] * d)
+    values = value if isinstance(value, list) else [value]
+    if len(values) != d or not all(_number(v) for v in values):
+        raise InputError(f"{scene.where('grid.origin')} = {value!r} must be {d} number(s) (m)")
+    return tuple(float(v) for v in values)
+
+
+def _check_box(scene, key, box, d):
+    for axis, bounds in box.items():
+        if (axis not in "xyz"[:d] or not isinstance(bounds, list) or len(bounds) != 2
+                or not all(_number(b) for b in bounds)):
+            raise InputError(f"{scene.where(f'{key}.{axis}')} = {bounds!r}: expected an axis in "
+                             f"{', '.join('xyz'[:d])} and [lo, hi] (m)")
+
+
+def _layout(scene, per_cell, d):
+    ok = (isinstance(per_cell, int) and not isinstance(per_cell, bool) and per_cell > 0) or (
+        isinstance(per_cell, list) and per_cell and all(_number(x) and 0 < x < 1 for x in per_cell))
+    if not ok:
+        raise InputError(f"{scene.where('particles.per_cell')} = {per_cell!r} must be a positive "
+                         f"integer or a list of parent coordinates in (0, 1)")
+    return tensor_layout(per_cell, d)
+
+
+def _bc(scene, grid, name, spec, d):
+    where = scene.where(f"bc.{name}")
+    if not isinstance(spec, dict):
+        raise InputError(f"{where} = {spec!r} must be a table")
+    if name not in grid.submesh.boundaries:
+        raise InputError(f"{where}: no boundary named {name!r} in the grid "
+                         f"(known: {', '.join(sorted(grid.submesh.boundaries))})")
+    for key in ("release", "ramp"):
+        value = spec.get(key, 0.0)              # release = inf (never) is allowed
+        if not (isinstance(value, (int, float)) and not isinstance(value, bool) and value >= 0):
+            raise InputError(f"{where}.{key} = {spec[key]!r} must be a time >= 0 (s)")
+    if spec.get("kind") == "normal_velocity" and not _number(spec.get("value", 0.0)):
+        raise InputError(f"{where}.value = {spec['value']!r} must be a number (m/s)")
+    return make_bc(spec, d, where)
 
 
 def _number(x):

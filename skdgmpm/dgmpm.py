@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import system
+from .bcs import FREE
 from .errors import InputError, InstabilityError
 from .faces import boundary_faces, interior_faces
 from .quadrature import ParticleMap, VolumeOperators, interpolation_matrix, particle_basis
@@ -125,26 +126,40 @@ class DGMPM:
         self.boundary_bc = which[self.boundary.facets]
 
     def _setup_transverse(self):
-        """Index arrays of CTU: (source face, side, transverse interior face, orientation)."""
+        """CTU topology: for each face and side, the source cell's two edges adjacent to the face,
+        with their outward normals and their index among interior or boundary faces."""
         self.ctu = None
         if self.transverse != "ctu" or self.d != 2:
             return
         m = self.grid.submesh
-        pos = -np.ones(m.nfacets, dtype=np.int64)
-        pos[self.interior.facets] = np.arange(len(self.interior))
-        entries = []
+        pos_int = -np.ones(m.nfacets, dtype=np.int64)
+        pos_int[self.interior.facets] = np.arange(len(self.interior))
+        pos_bnd = -np.ones(m.nfacets, dtype=np.int64)
+        pos_bnd[self.boundary.facets] = np.arange(len(self.boundary))
+        self.ctu = []
         for kind, faces in (("interior", self.interior), ("boundary", self.boundary)):
             sides = (("L", faces.cell_L), ("R", faces.cell_R)) if kind == "interior" else (("L", faces.cell_L),)
             for side, cells in sides:
                 k = np.argmax(m.t2f[:, cells] == faces.facets[None, :], axis=0)
-                for shift in (1, 3):                          # the two edges adjacent to face k
-                    j = pos[m.t2f[(k + shift) % 4, cells]]
-                    ok = j >= 0                               # boundary edges get no correction
-                    face = np.flatnonzero(ok)
-                    sign = np.where(self.interior.cell_L[j[ok]] == cells[ok], 1.0, -1.0)
-                    h = self.cell_volume[cells[ok]] / faces.measure[ok]
-                    entries.append((kind, side, face, j[ok], sign, h))
-        self.ctu = entries
+                edges = []
+                for shift in (1, 3):
+                    j = m.t2f[(k + shift) % 4, cells]
+                    j_int, j_bnd = pos_int[j], pos_bnd[j]
+                    sign = np.where(self.interior.cell_L[j_int] == cells, 1.0, -1.0)
+                    n = np.where((j_int >= 0)[:, None], sign[:, None] * self.interior.normal[j_int],
+                                 self.boundary.normal[j_bnd])
+                    edges.append((j_int, j_bnd, sign, n))
+                h = self.cell_volume[cells] / faces.measure
+                self.ctu.append((kind, side, h, edges))
+        frame = np.zeros((len(self.boundary), 2, 2))
+        free_v = np.zeros((len(self.boundary), 2), bool)
+        free_t = np.zeros((len(self.boundary), 2), bool)
+        for k, bc in [(-1, FREE)] + [(k, bc) for k, (_, bc) in enumerate(self.bcs)]:
+            sel = self.boundary_bc == k
+            if sel.any():
+                frame[sel], imp_v, imp_t = bc.constraints(self.boundary.normal[sel])
+                free_v[sel], free_t[sel] = ~imp_v, ~imp_t
+        self.ctu_boundary = (frame, free_v, free_t)
 
     # ---------------------------------------------------------------- stages
     def project(self, state):
@@ -182,10 +197,7 @@ class DGMPM:
             sel = self.boundary_bc == k
             if not sel.any():
                 continue
-            if bc is None:      # no condition given: free surface
-                t_s[sel], v_s[sel] = _free(t_L[sel], v_L[sel], Z[sel])
-            else:
-                t_s[sel], v_s[sel] = bc.star(time, t_L[sel], v_L[sel], Z[sel], b.normal[sel])
+            t_s[sel], v_s[sel] = (bc or FREE).star(time, t_L[sel], v_L[sel], Z[sel], b.normal[sel])
         flux = system.normal_flux(t_s, v_s, b.normal)
         fs = FaceStates(t_L, v_L, C, rho, Z, flux,
                         fluct_L=flux - system.normal_flux(t_L, v_L, b.normal))
@@ -208,33 +220,57 @@ class DGMPM:
 
     def transverse_flux(self, interior, boundary, dt):
         """CTU [R18 eq 34-37]: each fluctuation entering a cell is split on the characteristic
-        basis of the cell's two adjacent edges; the part moving out through an edge becomes the
-        extra flux -dt / (2 h) B+ A dU there (h: cell size across the source face)."""
-        correction = np.zeros_like(interior.flux)
+        basis of the cell's two edges adjacent to the source face; the part moving out through an
+        edge becomes the extra flux G = -dt / (2 h) B+ A dU there (h: cell size across the source
+        face). Returns corrections of the interior and boundary face fluxes.
+
+        At a boundary edge the ghost cell is a copy of the cell (it sends back the cell's own
+        correction through the opposite edge), and only the components the boundary condition
+        leaves free are changed, so the condition still holds exactly.
+        """
+        corr_int = np.zeros_like(interior.flux)
+        corr_bnd = np.zeros_like(boundary.flux)
         if self.ctu is None:
-            return correction
+            return corr_int, corr_bnd
         d = self.d
-        for kind, side, face, j, sign, h in self.ctu:
+        for kind, side, h, edges in self.ctu:
             fs = interior if kind == "interior" else boundary
-            w = (fs.fluct_L if side == "L" else fs.fluct_R)[face]
-            C = (fs.C_L if side == "L" else fs.C_R)[face]
-            rho = (fs.rho_L if side == "L" else fs.rho_R)[face]
-            n = sign[:, None] * self.interior.normal[j]
+            w = fs.fluct_L if side == "L" else fs.fluct_R
+            C = fs.C_L if side == "L" else fs.C_R
+            rho = fs.rho_L if side == "L" else fs.rho_R
             w_F, w_p = system.split(w, d)
-            B_F, B_p = transverse_positive(w_F, w_p, C, n, rho)
-            G = -(dt / (2.0 * h))[:, None] * system.join(B_F, B_p)
-            np.add.at(correction, j, sign[:, None] * G)
-        return correction
+            G = [-(dt / (2.0 * h))[:, None] * system.join(*transverse_positive(w_F, w_p, C, n, rho))
+                 for _, _, _, n in edges]
+            for e, (j_int, j_bnd, sign, _) in enumerate(edges):
+                ok = j_int >= 0
+                np.add.at(corr_int, j_int[ok], sign[ok, None] * G[e][ok])
+                ok = j_bnd >= 0
+                np.add.at(corr_bnd, j_bnd[ok], (G[e] - G[1 - e])[ok])
+        return corr_int, self._free_part(corr_bnd)
+
+    def _free_part(self, flux):
+        """Keep the components of a boundary flux correction that the condition leaves free."""
+        frame, free_v, free_t = self.ctu_boundary
+        F, p = system.split(flux, self.d)
+        dv = np.einsum("fkj,fja,fa->fk", frame, F, self.boundary.normal) * free_v
+        dt_ = np.einsum("fkj,fj->fk", frame, p) * free_t
+        return system.join(np.einsum("fkj,fk->fj", frame, dv)[:, :, None] * self.boundary.normal[:, None, :],
+                           np.einsum("fkj,fk->fj", frame, dt_))
 
     def residual(self, grid_state, time, dt):
         """M dU/dt = K^alpha F_alpha - int Phi F_N*; also returns the boundary power (W)."""
         R = self.volume_flux(grid_state)
         boundary, power = self.boundary_flux(grid_state, time)
         interior = self.interface_flux(grid_state)
-        flux = interior.flux + self.transverse_flux(interior, boundary, dt)
+        corr_int, corr_bnd = self.transverse_flux(interior, boundary, dt)
+        flux = interior.flux + corr_int
         R -= self.interior.integrate(flux, "L")
         R += self.interior.integrate(flux, "R")
-        R -= self.boundary.integrate(boundary.flux, "L")
+        R -= self.boundary.integrate(boundary.flux + corr_bnd, "L")
+        if self.ctu is not None:                   # work of the corrected boundary flux
+            F, p = system.split(boundary.flux + corr_bnd, self.d)
+            v = -np.einsum("fia,fa->fi", F, self.boundary.normal)
+            power = float(np.sum(self.boundary.measure * np.einsum("fi,fi->f", -p, v)))
         return R, power
 
     def advance(self, grid_state, time, dt):
@@ -278,10 +314,17 @@ class DGMPM:
         return state
 
     def step(self, state, dt_max=np.inf):
+        """One step; repeated with a smaller Delta t if the waves of the new state are faster
+        than the CFL condition allowed (e.g. the first step of an impact on a stiffening law)."""
         grid_state = self.project(state)
         dt = self.time_step(state, dt_max)
-        U_nodes, work = self.advance(grid_state, state.t, dt)
-        new = self.constitutive_update(state, self.back_map(U_nodes), dt)
+        for _ in range(4):
+            U_nodes, work = self.advance(grid_state, state.t, dt)
+            new = self.constitutive_update(state, self.back_map(U_nodes), dt)
+            dt_new = self.cfl * self.h_min / new.speed.max()
+            if dt <= dt_new * (1 + 1e-9):
+                break
+            dt = dt_new
         self.external_work += work
         return new
 
@@ -312,8 +355,3 @@ class DGMPM:
     @property
     def n_dofs_total(self):
         return self.n_dofs * system.n_components(self.d)
-
-
-def _free(t_L, v_L, Z):
-    """Zero traction: t* = 0, v* = v_L - Z^-1 t_L."""
-    return np.zeros_like(t_L), v_L - np.linalg.solve(Z, t_L[..., None])[..., 0]

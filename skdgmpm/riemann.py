@@ -11,6 +11,7 @@ Q, needs only (t*, v*). All functions are batched over faces: traction and veloc
 impedances (nf, d, d), tangents C (nf, d, d, d, d).
 """
 import numpy as np
+from scipy.linalg import null_space
 
 from .errors import InstabilityError
 
@@ -84,21 +85,22 @@ def godunov_state_eigen(P_L, v_L, P_R, v_R, C_L, C_R, rho_L, rho_R, N):
                                   ).reshape(nf, d, d * d) / rho[:, None, None]
         return A
 
-    def eig(A):
-        lam, R = np.linalg.eig(A)
-        return lam.real, R.real
-
-    lam_L, R_L = eig(jacobian(C_L, rho_L))
-    lam_R, R_R = eig(jacobian(C_R, rho_R))
+    J_L, J_R = jacobian(C_L, rho_L), jacobian(C_R, rho_R)
+    lam_L, R_L = np.linalg.eig(J_L)
+    lam_R, R_R = np.linalg.eig(J_R)
     scale = np.abs(np.concatenate([lam_L, lam_R], axis=1)).max(axis=1, keepdims=True)
-    left = lam_L < -1e-8 * scale
-    right = lam_R > 1e-8 * scale
-    zero_L = np.abs(lam_L) <= 1e-8 * scale
+    left = lam_L.real < -1e-8 * scale          # wave speeds are real (hyperbolicity)
+    right = lam_R.real > 1e-8 * scale
     Q_L = np.concatenate([P_L.reshape(nf, -1), v_L], axis=1)
     Q_R = np.concatenate([P_R.reshape(nf, -1), v_R], axis=1)
     out = np.empty_like(Q_L)
     for f in range(nf):                       # reference path only: clarity over speed
-        basis = np.concatenate([R_L[f][:, left[f]], R_L[f][:, zero_L[f]], R_R[f][:, right[f]]], axis=1)
+        # stationary waves: v = 0, P N = 0, i.e. P = e_i (x) m with m . N = 0 (built
+        # explicitly: eig may return this kernel as a complex pair)
+        tangents = null_space(N[f][None, :])                            # (d, d - 1)
+        kernel = np.zeros((nq, d * (d - 1)))
+        kernel[: d * d] = np.einsum("ij,am->iajm", np.eye(d), tangents).reshape(d * d, -1)
+        basis = np.concatenate([R_L[f][:, left[f]].real, kernel, R_R[f][:, right[f]].real], axis=1)
         delta = np.linalg.solve(basis, Q_R[f] - Q_L[f])
         n_left = left[f].sum()
         out[f] = Q_L[f] + basis[:, :n_left] @ delta[:n_left]

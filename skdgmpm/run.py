@@ -31,7 +31,7 @@ def check_cfl(disc):
     if disc.layout is None:
         return None
     stepper = disc.stepper
-    coords = tuple(np.unique(np.round(disc.layout[:, 0], 12)))
+    coords = tuple(float(c) for c in np.unique(np.round(disc.layout[:, 0], 12)))
     limit = _critical_cfl(coords, stepper.integrator)
     if stepper.cfl > limit + 1e-6:
         warnings.warn(f"{disc.scene.where('method.cfl')} = {stepper.cfl} exceeds the von Neumann "
@@ -117,11 +117,15 @@ def run(scene, overrides=(), out=None, force=False, progress=True, frames=None):
     elif overrides:
         scene = scene.with_overrides(overrides)
     t_end = scene.get("run.t_end")
-    if not (isinstance(t_end, (int, float)) and t_end > 0):
+    if not (isinstance(t_end, (int, float)) and not isinstance(t_end, bool) and 0 < t_end < np.inf):
         raise InputError(f"{scene.where('run.t_end')} = {t_end!r} must be a time > 0 (s)")
-    n_frames = int(frames if frames is not None else scene.get("run.frames", 20))
+    n_frames = int(frames) if frames is not None else scene.get("run.frames", 20)
+    if not (isinstance(n_frames, int) and not isinstance(n_frames, bool) and n_frames >= 1):
+        raise InputError(f"{scene.where('run.frames')} = {n_frames!r} must be an integer >= 1")
     if out is not None:
         out = Path(out)
+        if out.exists() and not out.is_dir():
+            raise InputError(f"--out {out}: exists and is not a directory")
         if out.exists() and any(out.iterdir()) and not force:
             raise InputError(f"--out {out}: directory exists and is not empty (use --force to replace it)")
     disc = build(scene)
@@ -134,6 +138,16 @@ def run(scene, overrides=(), out=None, force=False, progress=True, frames=None):
         partial = out.with_name(out.name + ".partial")
         shutil.rmtree(partial, ignore_errors=True)
         partial.mkdir(parents=True)
+    try:
+        return _run(scene, disc, solution, stepper, state, t_end, n_frames, out, partial, progress)
+    except BaseException:                 # crash or Ctrl-C: leave no half-written output behind
+        if partial is not None:
+            shutil.rmtree(partial, ignore_errors=True)
+        raise
+
+
+def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, partial, progress):
+    if partial is not None:
         output.write_grid(partial / "grid.vtu", disc.grid)
 
     history = {k: [] for k in ("step", "t", "kinetic", "stored", "total", "external_work", "balance")}
@@ -171,6 +185,8 @@ def run(scene, overrides=(), out=None, force=False, progress=True, frames=None):
                     next_frame += 1
     except InstabilityError as exc:
         status, message = "unstable", str(exc)
+        if exc.step is None:              # raised on a face (Riemann solver), not on a particle
+            message += f" during step {state.step + 1} (from t = {state.t:.6g} s)"
         if frame_list[-1].step != state.step:
             snapshot(state)                       # the last good state
     finally:

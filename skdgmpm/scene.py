@@ -137,7 +137,9 @@ class Scene:
         return base / relative
 
     def with_overrides(self, overrides):
-        return Scene.from_dict(apply_overrides(self.data, overrides), self.name, self.path)
+        data = apply_overrides(self.data, overrides)
+        _check(apply_overrides({}, overrides), SCHEMA, "--set")   # errors name --set, not the file
+        return Scene.from_dict(data, self.name, self.path)
 
     @classmethod
     def from_dict(cls, data, name="scene", path=None):
@@ -177,7 +179,13 @@ def exact_solution(scene):
     if name == "svk_bar_riemann":
         params["nu"] = mat.get("nu")
     if "load" in spec:                                   # P11 = t . N with N = -e1 at the left end
-        bc = scene.get(f"bc.{spec.pop('load')}", {})
+        load = spec.pop("load")
+        bc = scene.get(f"bc.{load}") if isinstance(load, str) else None
+        if not isinstance(bc, dict):
+            raise InputError(f"{scene.where('exact.load')} = {load!r}: no [bc.{load}] table in the scene")
+        if bc.get("kind") not in ("traction", "free"):
+            raise InputError(f"{scene.where('exact.load')} = {load!r}: bc.{load} must be of kind "
+                             f"'traction' or 'free', not {bc.get('kind')!r}")
         params["traction"] = -float(np.atleast_1d(bc.get("value", [0.0]))[0])
     if name == "elastic_bar_step":
         params["length"] = scene.get("grid.length", scene.get("grid.size", [None])[0])

@@ -1,0 +1,78 @@
+"""Boundary conditions: the boundary stationary state honours each condition exactly and stays on
+the interior's characteristic (ghost-state construction of R18 §4.5)."""
+import numpy as np
+import pytest
+
+from skdgmpm.bcs import Schedule, make_bc
+from skdgmpm.errors import InputError
+
+
+@pytest.fixture
+def faces():
+    rng = np.random.default_rng(0)
+    nf, d = 12, 2
+    N = rng.standard_normal((nf, d))
+    N /= np.linalg.norm(N, axis=1, keepdims=True)
+    B = rng.standard_normal((nf, d, d))
+    Z = 4e7 * (np.einsum("fij,fkj->fik", B, B) + np.eye(d))        # SPD, coupled normal/shear
+    return dict(t_L=1e8 * rng.standard_normal((nf, d)), v_L=10 * rng.standard_normal((nf, d)), Z=Z, N=N)
+
+
+def on_characteristic(f, t, v):
+    return np.allclose(t - f["t_L"], np.einsum("fij,fj->fi", f["Z"], v - f["v_L"]), rtol=1e-9, atol=1e-3)
+
+
+def star(spec, f, time=0.0):
+    return make_bc(spec, 2).star(time, f["t_L"], f["v_L"], f["Z"], f["N"])
+
+
+def test_velocity(faces):
+    t, v = star({"kind": "velocity", "value": [3.0, -1.0]}, faces)
+    assert np.allclose(v, [3.0, -1.0]) and on_characteristic(faces, t, v)
+
+
+def test_traction_and_free(faces):
+    t, v = star({"kind": "traction", "value": [1e9, 2e8]}, faces)
+    assert np.allclose(t, [1e9, 2e8]) and on_characteristic(faces, t, v)
+    t, v = star({"kind": "free"}, faces)
+    assert np.allclose(t, 0.0, atol=1e-6) and on_characteristic(faces, t, v)
+
+
+def test_symmetry_in_the_local_frame(faces):
+    t, v = star({"kind": "symmetry"}, faces)
+    N = faces["N"]
+    T = np.stack([-N[:, 1], N[:, 0]], axis=1)
+    assert np.allclose(np.sum(v * N, axis=1), 0.0, atol=1e-12)
+    assert np.allclose(np.sum(t * T, axis=1), 0.0, atol=1e-4)
+    assert on_characteristic(faces, t, v)
+
+
+def test_mixed_per_axis(faces):
+    t, v = star({"kind": "mixed", "velocity": {"x": 5.0}, "traction": {"y": 0.0}}, faces)
+    assert np.allclose(v[:, 0], 5.0) and np.allclose(t[:, 1], 0.0, atol=1e-4)
+    assert on_characteristic(faces, t, v)
+
+
+def test_transmissive_copies_interior(faces):
+    t, v = star({"kind": "transmissive"}, faces)
+    assert np.array_equal(t, faces["t_L"]) and np.array_equal(v, faces["v_L"])
+
+
+def test_release_and_ramp(faces):
+    spec = {"kind": "traction", "value": [1e9, 0.0], "release": 1e-3}
+    assert np.allclose(star(spec, faces, 0.5e-3)[0][:, 0], 1e9)
+    assert np.allclose(star(spec, faces, 1.5e-3)[0], 0.0, atol=1e-6)      # free after release
+    assert Schedule(ramp=2.0)(1.0) == 0.5 and Schedule(ramp=2.0)(3.0) == 1.0
+
+
+@pytest.mark.parametrize("spec, match", [
+    ({"kind": "glue"}, "kind"),
+    ({"kind": "velocity"}, "value"),
+    ({"kind": "velocity", "value": [1.0]}, "2 number"),
+    ({"kind": "traction", "value": ["a", 1]}, "value"),
+    ({"kind": "mixed", "velocity": {"x": 1.0}}, "exactly one"),
+    ({"kind": "free", "colour": 1}, "colour"),
+])
+def test_bad_specs(spec, match):
+    with pytest.raises(InputError, match=match):
+        make_bc(spec, 2, "bc.test")
