@@ -124,6 +124,10 @@ def build(scene):
         with np.errstate(over="ignore", invalid="ignore"):
             initial = stepper.initial_state(np.broadcast_to(F0, (n, d, d)).copy(),
                                             np.broadcast_to(v0, (n, d)).copy())
+        with np.errstate(over="ignore", invalid="ignore"):
+            energy = stepper.energy(initial)
+        if not np.all(np.isfinite(energy)):
+            raise InstabilityError("non-finite energy")
     except InstabilityError as exc:
         raise InputError(f"{scene.where('initial')}: the initial state is not admissible "
                          f"({str(exc).split(' at step')[0]})") from None

@@ -71,6 +71,7 @@ def main(argv=None):
     p.set_defaults(func=_cmd_stability)
 
     args = parser.parse_args(argv)
+    formatwarning = warnings.formatwarning
     with warnings.catch_warnings():
         warnings.simplefilter("always")
         warnings.formatwarning = lambda msg, cat, *a, **k: f"warning: {msg}\n"
@@ -79,6 +80,8 @@ def main(argv=None):
         except InputError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
+        finally:
+            warnings.formatwarning = formatwarning      # main() may be called from Python
 
 
 if __name__ == "__main__":

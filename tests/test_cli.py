@@ -1,0 +1,213 @@
+"""Command line and API happy paths: list, run (files on disk), stability, scene paths, warnings."""
+import csv
+import json
+import shutil
+import subprocess
+import sys
+import warnings
+import xml.etree.ElementTree as ET
+from importlib import resources
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pytest
+
+from skdgmpm.cli import main
+from skdgmpm.run import Result, run
+
+CASES = Path(str(resources.files("skdgmpm.cases")))
+ENERGY_HEADER = ["step", "t", "kinetic", "stored", "total", "external_work", "balance"]
+
+
+def cli(capsys, *argv):
+    rc = main([str(a) for a in argv])
+    captured = capsys.readouterr()
+    return rc, captured.out, captured.err
+
+
+def test_list_shows_every_scene(capsys):
+    rc, out, err = cli(capsys, "list")
+    assert rc == 0 and err == ""
+    listed = [line.split()[0] for line in out.splitlines()]
+    scenes = sorted(p.stem for p in CASES.glob("*.toml"))
+    assert scenes and sorted(listed) == scenes
+    for line in out.splitlines():
+        assert line.split()[1] in ("1D", "2D")
+
+
+@pytest.fixture(scope="module")
+def bar_run(tmp_path_factory):
+    """One small run of bar_elastic_1d through the CLI, shared by the checks below."""
+    base = tmp_path_factory.mktemp("bar")
+    out = base / "DIR"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.chdir(base)
+        rc = main(["run", "bar_elastic_1d", "--set", "grid.cells=30", "--set", "run.t_end=3e-4",
+                   "--out", str(out), "--quiet"])
+    assert rc == 0
+    return base, out
+
+
+def test_run_writes_the_outputs(bar_run):
+    base, out = bar_run
+    for name in ("grid.vtu", "particles.pvd", "energy.csv", "summary.json"):
+        assert (out / name).is_file(), name
+    assert not (base / "DIR.partial").exists()
+    assert not (base / "runs").exists()                   # --out is honoured
+
+
+def test_run_pvd_references_existing_frames(bar_run):
+    _, out = bar_run
+    root = ET.parse(out / "particles.pvd").getroot()
+    assert root.tag == "VTKFile" and root.get("type") == "Collection"
+    entries = root.findall("./Collection/DataSet")
+    assert len(entries) >= 2
+    times = [float(e.get("timestep")) for e in entries]
+    assert times[0] == 0.0 and np.all(np.diff(times) > 0)
+    assert times[-1] == pytest.approx(3e-4, rel=1e-9)
+    for k, e in enumerate(entries):
+        assert e.get("file") == f"particles_{k:04d}.vtu"
+        assert (out / e.get("file")).is_file()
+    frames = sorted(p.name for p in out.glob("particles_*.vtu"))
+    assert frames == [e.get("file") for e in entries]
+
+
+def test_run_energy_csv(bar_run):
+    _, out = bar_run
+    with open(out / "energy.csv") as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0] == ENERGY_HEADER
+    values = np.array(rows[1:], dtype=float)
+    assert np.all(np.isfinite(values))
+    assert np.all(np.diff(values[:, 0]) == 1) and np.all(np.diff(values[:, 1]) > 0)
+    np.testing.assert_allclose(values[:, 4], values[:, 2] + values[:, 3], rtol=1e-9)
+
+
+def test_run_summary(bar_run):
+    _, out = bar_run
+    summary = json.loads((out / "summary.json").read_text())
+    for key in ("case", "method", "order", "dim", "cells", "particles", "dofs", "steps",
+                "t_end", "wall_s", "errors"):
+        assert key in summary, key
+    assert summary["case"] == "bar_elastic_1d" and summary["method"] == "dgmpm"
+    assert summary["status"] == "ok" and "message" not in summary
+    assert (summary["dim"], summary["cells"], summary["particles"], summary["order"]) == (1, 30, 30, 1)
+    assert summary["dofs"] == 30 * 2 * 2                  # 2 nodes per cell, [F11, p1]
+    assert summary["steps"] > 0 and summary["wall_s"] >= 0
+    assert summary["t_end"] == pytest.approx(3e-4, rel=1e-9)
+    assert summary["errors"]
+    for field, norms in summary["errors"].items():
+        assert set(norms) >= {"L1_rel", "L2_rel", "Linf"}, field
+        assert all(np.isfinite(v) for v in norms.values())
+
+
+def test_run_frames_and_grid_read_with_meshio(bar_run):
+    _, out = bar_run
+    frame = meshio.read(out / "particles_0001.vtu")
+    n = len(frame.points)
+    assert n == 30
+    for name, width in (("F", 9), ("P", 9), ("velocity", 3), ("cauchy", 9)):
+        assert frame.point_data[name].shape == (n, width), name
+        assert np.all(np.isfinite(frame.point_data[name]))
+    F = frame.point_data["F"].reshape(n, 3, 3)
+    np.testing.assert_allclose(F[:, 1:, 1:], np.broadcast_to(np.eye(2), (n, 2, 2)))
+    grid = meshio.read(out / "grid.vtu")
+    assert len(grid.cells[0].data) == 30
+
+
+def test_run_prints_a_summary_line(capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    rc, out, err = cli(capsys, "run", "bar_elastic_1d", "--set", "grid.cells=20",
+                       "--set", "run.t_end=1e-4", "--out", tmp_path / "o", "--quiet")
+    assert rc == 0 and err == ""
+    first = out.splitlines()[0]
+    assert first.startswith("bar_elastic_1d: ok, ") and first.endswith(str(tmp_path / "o"))
+    assert any("L1_rel" in line for line in out.splitlines()[1:])
+
+
+def test_stability(capsys):
+    rc, out, err = cli(capsys, "stability", "--layout", "0.25,0.75")
+    assert rc == 0 and err == ""
+    table = {line.split()[0]: line.split()[1:] for line in out.splitlines()}
+    assert table["method"] == ["bound", "spectral"]
+    assert table["euler"][0] == "0.43"
+    assert table["rk2"][1] == "1.00"
+
+
+def test_stability_json(capsys):
+    rc, out, _ = cli(capsys, "stability", "--layout", "1/4,3/4", "--json")
+    assert rc == 0
+    report = json.loads(out.splitlines()[-1])
+    assert report["layout"] == [0.25, 0.75]
+    assert round(report["euler_bound"], 2) == 0.43 and round(report["rk2_spectral"], 2) == 1.00
+
+
+def test_stability_subprocess(tmp_path):
+    exe = Path(sys.executable).with_name("skdgmpm")
+    proc = subprocess.run([str(exe), "stability", "--layout", "0.25,0.75"], capture_output=True,
+                          text=True, cwd=tmp_path, timeout=120)
+    assert proc.returncode == 0 and proc.stderr == ""
+    assert "0.43" in proc.stdout and "1.00" in proc.stdout
+
+
+def test_scene_given_as_a_path(capsys, tmp_path, monkeypatch):
+    """A .toml copied elsewhere runs; the case is named after the file; default --out is
+    runs/<stem> in the working directory."""
+    monkeypatch.chdir(tmp_path)
+    shutil.copy(CASES / "bar_elastic_1d.toml", tmp_path / "my_bar.toml")
+    rc, out, err = cli(capsys, "run", "my_bar.toml", "--set", "grid.cells=20",
+                       "--set", "run.t_end=1e-4", "--quiet")
+    assert rc == 0, err
+    summary = json.loads((tmp_path / "runs" / "my_bar" / "summary.json").read_text())
+    assert summary["case"] == "my_bar" and summary["cells"] == 20
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["my_bar.toml", "runs"]
+
+
+def test_mesh_scene_given_as_a_path(capsys, tmp_path, monkeypatch):
+    """A scene read from a path resolves its mesh file next to it."""
+    monkeypatch.chdir(tmp_path)
+    shutil.copy(CASES / "partial_impact_2d.toml", tmp_path / "plate.toml")
+    shutil.copy(CASES / "plate_4x3.msh", tmp_path / "plate_4x3.msh")
+    rc, _, err = cli(capsys, "run", tmp_path / "plate.toml", "--set", "run.t_end=1e-5",
+                     "--out", tmp_path / "o", "--quiet")
+    assert rc == 0, err
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert summary["dim"] == 2 and summary["status"] == "ok"
+
+
+def test_api_run(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    result = run("bar_elastic_1d", overrides=["grid.cells=20"], progress=False)
+    assert isinstance(result, Result)
+    assert result.status == "ok" and result.out is None
+    text = repr(result)
+    assert "\n" not in text and text.startswith("<Result bar_elastic_1d") and "ok" in text
+    assert result.state.t == pytest.approx(1.5e-3, rel=1e-9)
+    assert set(result.errors) and len(result.X) == 20
+    assert list(tmp_path.iterdir()) == []                 # no out: nothing written
+
+
+def test_cfl_above_von_neumann_limit_warns(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    tiny = ["grid.cells=20", "run.t_end=1e-4", "particles.per_cell=2"]
+    with pytest.warns(UserWarning, match="von Neumann") as record:
+        run("bar_elastic_1d", overrides=tiny + ["method.cfl=0.9"], progress=False)
+    message = str([w for w in record if "von Neumann" in str(w.message)][0].message)
+    assert "method.cfl = 0.9" in message and "0.69" in message and "\n" not in message
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        run("bar_elastic_1d", overrides=tiny + ["method.cfl=0.5"], progress=False)
+    assert not [w for w in caught if "von Neumann" in str(w.message)]
+
+
+def test_cli_restores_warning_format(capsys, tmp_path, monkeypatch):
+    """main() prints warnings as 'warning: ...' lines, and leaves the process as it found it."""
+    monkeypatch.chdir(tmp_path)
+    before = warnings.formatwarning
+    rc, _, _ = cli(capsys, "run", "bar_elastic_1d", "--set", "grid.cells=20",
+                   "--set", "run.t_end=1e-4", "--set", "particles.per_cell=2",
+                   "--set", "method.cfl=0.9", "--out", tmp_path / "o", "--quiet")
+    assert rc == 0
+    assert warnings.formatwarning is before
