@@ -43,14 +43,17 @@ def _tensor9(T):
 
 
 def write_particles(path, stepper, state):
-    """Particles at their current positions with U, Q, Cauchy stress and reference position."""
+    """Particles at their current positions with U, Q, Cauchy stress and reference position.
+
+    F is embedded in 3D as in the laws (identity out of plane); P is the d x d block, zero padded.
+    """
     d = stepper.d
     F, p = system.split(state.U, d)
     P, v = system.split(state.Q, d)
     sigma = stepper.materials.cauchy(F, stepper.particles.material)
     n = len(state.x)
     data = {
-        "F": _tensor9(F), "P": _tensor9(P), "cauchy": sigma.reshape(n, 9),
+        "F": system.embed(F).reshape(n, 9), "P": _tensor9(P), "cauchy": sigma.reshape(n, 9),
         "velocity": _pad3(v), "momentum": _pad3(p), "X": _pad3(stepper.particles.X),
         "volume": stepper.particles.volume, "material": stepper.particles.material.astype(float),
     }
