@@ -166,10 +166,10 @@ def make_bc(spec, d, where="boundary"):
         value = spec.pop(key, None)
         if value is None:
             raise InputError(f"{where}.{key} is missing for kind = {kind!r}")
-        value = np.atleast_1d(np.asarray(value, dtype=float)) if _numeric(value) else None
-        if value is None or value.shape != (d,):
-            raise InputError(f"{where}.{key} = {spec.get(key, value)!r} must be {d} number(s)")
-        return value
+        array = np.atleast_1d(np.asarray(value, dtype=float)) if _numeric(value) else None
+        if array is None or array.shape != (d,):
+            raise InputError(f"{where}.{key} = {value!r} must be {d} number(s)")
+        return array
 
     if kind == "velocity":
         bc = Velocity(vector("value"), schedule)

@@ -338,7 +338,12 @@ class DGMPM:
         bad = ~finite | ~hyperbolic
         if bad.any():
             p = int(np.flatnonzero(bad)[0])
-            what = "non-finite values" if not finite[p] else "loss of hyperbolicity"
+            if not finite[p]:
+                what = "non-finite values"
+            elif np.linalg.det(F[p]) <= 0:
+                what = "inverted material (det F <= 0)"
+            else:
+                what = "loss of hyperbolicity"
             raise InstabilityError(
                 f"{what} at step {state.step}, t = {state.t:.6g} s, particle {p} "
                 f"(X = {np.round(self.particles.X[p], 6).tolist()})",

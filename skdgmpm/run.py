@@ -75,13 +75,14 @@ class Result:
             "order": 1, "integrator": st.integrator, "transverse": st.transverse,
             "cfl": st.cfl, "dim": s.dim, "cells": int(st.grid.submesh.nelements),
             "grid_cells": int(st.grid.mesh.nelements), "particles": len(self.disc.particles),
-            "dofs": int(st.n_dofs_total), "steps": int(self.state.step), "t_end": float(self.state.t),
+            "dofs": int(st.n_dofs_total), "steps": int(self.state.step),
+            "t_end": float(s.get("run.t_end")), "t_final": float(self.state.t),
             "wall_s": self.wall_s, "wall_per_step_s": self.wall_s / max(self.state.step, 1),
             "status": self.status,
         }
         if self.message:
             out["message"] = self.message
-        energy = {k: float(v[-1]) for k, v in self.history.items() if k not in ("step",)}
+        energy = {k: float(v[-1]) for k, v in self.history.items() if k not in ("step", "t")}
         energy["balance_change"] = float(self.history["balance"][-1] - self.history["balance"][0])
         out["energy"] = energy
         if self.errors:

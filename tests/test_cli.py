@@ -202,6 +202,7 @@ def test_cfl_above_von_neumann_limit_warns(tmp_path, monkeypatch):
     assert not [w for w in caught if "von Neumann" in str(w.message)]
 
 
+@pytest.mark.filterwarnings("ignore:.*von Neumann")
 def test_cli_restores_warning_format(capsys, tmp_path, monkeypatch):
     """main() prints warnings as 'warning: ...' lines, and leaves the process as it found it."""
     monkeypatch.chdir(tmp_path)
