@@ -1,6 +1,8 @@
 """From a `Scene` to a ready stepper: grid, particles, materials, boundary conditions."""
 from dataclasses import dataclass
 
+import warnings
+
 import numpy as np
 
 from .bcs import make_bc
@@ -189,6 +191,9 @@ def _bc(scene, grid, name, spec, d):
     if name not in grid.submesh.boundaries:
         raise InputError(f"{where}: no boundary named {name!r} in the grid "
                          f"(known: {', '.join(sorted(grid.submesh.boundaries))})")
+    if len(grid.submesh.boundaries[name]) == 0:
+        warnings.warn(f"{where}: boundary {name!r} touches no cell holding particles, the condition "
+                      f"is unused (the body's own boundary is named 'surface')", stacklevel=4)
     for key in ("release", "ramp"):
         value = spec.get(key, 0.0)              # release = inf (never) is allowed
         if not (isinstance(value, (int, float)) and not isinstance(value, bool) and value >= 0):

@@ -276,7 +276,9 @@ class DGMPM:
     def advance(self, grid_state, time, dt):
         """(f) forward Euler [R18 eq 20] or Heun's RK2, both stages on the grid."""
         inv_M = 1.0 / self.ops.lumped[:, None]
-        R, power = self.residual(grid_state, time, dt)
+        # Euler takes boundary values at mid-step (the step's mean for a ramp; a release at
+        # t_u = n dt is not missed through round-off in t); Heun at its stage times
+        R, power = self.residual(grid_state, time + (0.5 * dt if self.integrator == "euler" else 0.0), dt)
         U1 = grid_state.U + dt * inv_M * R
         if self.integrator == "euler":
             return U1, dt * power

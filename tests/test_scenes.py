@@ -155,3 +155,29 @@ def test_plate_impact_runs_there_and_back_without_energy_growth(transverse, cfl,
     f = r.fields()
     idx = line_particles(r)
     assert abs(f["x1"][idx[0]] - r.X[idx[0], 0] - 1000.0 * r.state.t) < 0.05 * 1000.0 * r.state.t
+
+
+def test_inactive_cells_cost_nothing_and_the_body_boundary_is_where_they_start():
+    """The 6 m bar inside an 8 m grid (cells beyond 6 m empty, no dofs there): fixing the body's
+    own boundary ('surface') gives the same particle values as the 6 m bar fixed at its end."""
+    t = float(200 * 0.04 / C_BAR)
+    ref = run("bar_elastic_1d", [f"run.t_end={t!r}"], progress=False)
+    with pytest.warns(UserWarning, match="bc.right: boundary 'right' touches no cell"):
+        r = run("bar_elastic_1d", ["grid.length=8.0", "grid.cells=200", "body.box={x = [0.0, 6.0]}",
+                                   f"run.t_end={t!r}", "bc.surface={kind = \"velocity\", value = [0.0]}"],
+                progress=False)
+    assert r.stepper.grid.submesh.nelements == 150 and r.stepper.n_dofs == 300
+    assert np.allclose(r.X, ref.X)
+    assert np.abs(r.fields()["P11"] - ref.fields()["P11"]).max() < 1e-9 * 1e9
+
+
+def test_released_load_travels_as_a_pulse():
+    """Traction released at t_u (1 ppc, CFL 1): by linearity the exact solution is the step
+    solution minus the same step delayed by t_u, a pulse of length c t_u."""
+    dt = 0.04 / C_BAR
+    t_u, t = float(20 * dt), float(90 * dt)
+    r = run("bar_elastic_1d", [f"bc.left.release={t_u!r}", f"run.t_end={t!r}"], progress=False)
+    exact = (r.exact.fields(r.X, t)["P11"] - r.exact.fields(r.X, t - t_u)["P11"])
+    P = r.fields()["P11"]
+    assert np.abs(P - exact).max() < 1e-9 * 1e9
+    assert np.count_nonzero(P < -0.5e9) == 20                 # pulse of 20 cells = c t_u
