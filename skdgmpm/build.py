@@ -79,17 +79,29 @@ def active_cells(scene, mesh):
     return cells
 
 
+def _material(scene, table, where):
+    spec = dict(table)
+    law = spec.pop("law", "linear_elastic")
+    try:
+        return make_material(law, **spec)
+    except InputError as exc:            # the message starts with "material: "
+        message = str(exc).removeprefix("material: ")
+        raise InputError(f"{scene.where(where)}: {message}") from None
+
+
 def build(scene):
     """Validate and discretise a scene: raises InputError before anything is computed."""
     d = scene.dim
     mesh = build_mesh(scene)
-    mat_spec = dict(scene.data["material"])
-    law = mat_spec.pop("law", "linear_elastic")
-    try:
-        material = make_material(law, **mat_spec)
-    except InputError as exc:            # the message starts with "material: "
-        message = str(exc).removeprefix("material: ")
-        raise InputError(f"{scene.where('material')}: {message}") from None
+    materials = [_material(scene, scene.data["material"], "material")]
+    regions = scene.get("regions") or []
+    for k, region in enumerate(regions):
+        where = f"regions[{k}]"
+        if not (isinstance(region, dict) and isinstance(region.get("box"), dict)
+                and isinstance(region.get("material"), dict) and set(region) <= {"box", "material"}):
+            raise InputError(f"{scene.where(where)} = {region!r} must be a table with box and material")
+        _check_box(scene, f"{where}.box", region["box"], d)
+        materials.append(_material(scene, region["material"], f"{where}.material"))
 
     pspec = scene.get("particles") or {}
     if "file" in pspec:
@@ -105,7 +117,18 @@ def build(scene):
         X, xi, cell, volume = fill_cells(grid.submesh, np.arange(grid.submesh.nelements), layout,
                                          grid.cell_volumes())
     n = len(X)
-    particles = Particles(X, xi, cell, volume, np.full(n, material.rho), np.zeros(n, dtype=np.int64))
+    # material of a particle: the last region containing its cell's centre, else the default
+    centre = grid.submesh.p[:, grid.submesh.t].mean(axis=1)[:, cell]
+    which = np.zeros(n, dtype=np.int64)
+    for k, region in enumerate(regions):
+        inside = np.ones(n, dtype=bool)
+        for axis, key in enumerate("xy"[:d]):
+            if key in region["box"]:
+                lo, hi = region["box"][key]
+                inside &= (centre[axis] >= lo) & (centre[axis] <= hi)
+        which[inside] = k + 1
+    rho0 = np.array([m.rho for m in materials])[which]
+    particles = Particles(X, xi, cell, volume, rho0, which)
 
     bcs = [(name, _bc(scene, grid, name, spec, d)) for name, spec in (scene.get("bc") or {}).items()]
     method = scene.data["method"]
@@ -116,7 +139,7 @@ def build(scene):
         if key in method and method[key] not in choices:
             raise InputError(f"{scene.where(f'method.{key}')} = {method[key]!r}: expected one of "
                              f"{', '.join(choices)}")
-    stepper = DGMPM(grid, particles, MaterialSet((material,)), bcs, cfl=cfl,
+    stepper = DGMPM(grid, particles, MaterialSet(tuple(materials)), bcs, cfl=cfl,
                     integrator=method.get("integrator", "euler"),
                     transverse=method.get("transverse", "dcu"))
     init = scene.get("initial") or {}

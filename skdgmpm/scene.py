@@ -25,6 +25,7 @@ SCHEMA = {
     "body": {"box": dict, "subdomain": str},
     "particles": {"per_cell": (int, list), "file": str},
     "material": {"law": str, "E": NUMBER, "nu": NUMBER, "rho": NUMBER},
+    "regions": list,
     "initial": {"velocity": list, "F": list},
     "boundaries": None,
     "bc": None,
