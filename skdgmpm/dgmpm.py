@@ -15,60 +15,15 @@ import numpy as np
 
 from . import system
 from .bcs import FREE
-from .errors import InputError, InstabilityError
-from .faces import boundary_faces, interior_faces
+from .errors import InputError
+from .faces import interior_faces
 from .quadrature import ParticleMap, VolumeOperators, interpolation_matrix, particle_basis
-from .riemann import godunov_state, impedance, transverse_positive
+from .riemann import transverse_positive
+from .scheme import GodunovScheme, GridState, ParticleState, cell_values
 
 
 @dataclass
-class ParticleState:
-    """What the particles carry at time ``t``: U = [F, p], Q = [P, v], current positions x."""
-
-    t: float
-    U: np.ndarray          # (n, d*d + d)
-    Q: np.ndarray          # (n, d*d + d)
-    x: np.ndarray          # (n, d)
-    step: int = 0
-    speed: np.ndarray = None   # (n,) fastest wave speed along the grid axes
-
-    def copy(self):
-        return ParticleState(self.t, self.U.copy(), self.Q.copy(), self.x.copy(), self.step, self.speed)
-
-
-@dataclass
-class GridState:
-    """Nodal U and Q (n_dofs, d*d + d)."""
-
-    U: np.ndarray
-    Q: np.ndarray
-
-
-@dataclass
-class FaceStates:
-    """Side-averaged states and linearisation on a face set (one side or both)."""
-
-    t_L: np.ndarray
-    v_L: np.ndarray
-    C_L: np.ndarray
-    rho_L: np.ndarray
-    Z_L: np.ndarray
-    flux: np.ndarray = None          # F_N* (nf, ncomp)
-    fluct_L: np.ndarray = None       # A- dU entering side L (nf, ncomp)
-    fluct_R: np.ndarray = None       # A+ dU entering side R
-
-
-def _cell_values(name, cells, values, n_cells):
-    """One value per cell from per-particle values; error if a cell mixes them."""
-    out = np.full(n_cells, -1, dtype=values.dtype)
-    out[cells] = values
-    if np.any(out[cells] != values):
-        raise InputError(f"particles: a cell holds particles of different {name}")
-    return out
-
-
-@dataclass
-class DGMPM:
+class DGMPM(GodunovScheme):
     """First-order DGMPM stepper on a `Grid` with `Particles`.
 
     Parameters
@@ -105,26 +60,14 @@ class DGMPM:
         self.dof_cell = np.empty(basis.N, dtype=np.int64)
         self.dof_cell[basis.element_dofs] = np.arange(g.submesh.nelements)[None, :]
         n_cells = g.submesh.nelements
-        self.cell_material = _cell_values("materials", p.cell, p.material, n_cells)
+        self.cell_material = cell_values("materials", p.cell, p.material, n_cells)
         self.cell_volume = g.cell_volumes()
         self.h_min = float(g.cell_sizes().min())
         self.interior = interior_faces(g.submesh, g.element)
-        self._setup_boundary()
+        self._setup_boundary(g.element)
         self._setup_transverse()
 
     # ---------------------------------------------------------------- set-up
-    def _setup_boundary(self):
-        m = self.grid.submesh
-        facets = m.boundary_facets()
-        which = np.full(m.nfacets, -1)
-        for k, (name, _) in enumerate(self.bcs):
-            if name not in m.boundaries:
-                raise InputError(f"boundary.{name}: no boundary of that name in the grid "
-                                 f"(known: {', '.join(sorted(m.boundaries))})")
-            which[m.boundaries[name]] = k
-        self.boundary = boundary_faces(m, self.grid.element, facets, self.n_dofs)
-        self.boundary_bc = which[self.boundary.facets]
-
     def _setup_transverse(self):
         """CTU topology: for each face and side, the source cell's two edges adjacent to the face,
         with their outward normals and their index among interior or boundary faces."""
@@ -169,54 +112,9 @@ class DGMPM:
         Q[:, self.d * self.d:] = U[:, self.d * self.d:] / self.map.rho[:, None]
         return GridState(U, Q)
 
-    def time_step(self, state, dt_max=np.inf):
-        """(b) Delta t = CFL h_min / c_max from the current fastest wave [R18 §5(b)]."""
-        return min(self.cfl * self.h_min / state.speed.max(), dt_max)
-
     def volume_flux(self, grid_state):
         """(c) sum_alpha K^alpha F_alpha(Q)."""
         return system.volume_flux(grid_state.Q, self.ops.stiffness)
-
-    def _side(self, faces, T, grid_state, cells):
-        d = self.d
-        Qf = T @ grid_state.Q
-        Ff = (T @ grid_state.U)[:, : d * d].reshape(-1, d, d)
-        P, v = system.split(Qf, d)
-        C = self.materials.tangent(Ff, self.cell_material[cells])
-        rho = T @ self.map.rho
-        t = np.einsum("fia,fa->fi", P, faces.normal)
-        return t, v, C, rho, Qf
-
-    def boundary_flux(self, grid_state, time):
-        """(d) ghost states -> boundary stationary states and fluxes; returns states and power."""
-        b = self.boundary
-        t_L, v_L, C, rho, Q_L = self._side(b, b.T_L, grid_state, b.cell_L)
-        Z = impedance(C, b.normal, rho)
-        t_s, v_s = t_L.copy(), v_L.copy()
-        for k, (_, bc) in [(-1, (None, None))] + list(enumerate(self.bcs)):
-            sel = self.boundary_bc == k
-            if not sel.any():
-                continue
-            t_s[sel], v_s[sel] = (bc or FREE).star(time, t_L[sel], v_L[sel], Z[sel], b.normal[sel])
-        flux = system.normal_flux(t_s, v_s, b.normal)
-        fs = FaceStates(t_L, v_L, C, rho, Z, flux,
-                        fluct_L=flux - system.normal_flux(t_L, v_L, b.normal))
-        power = float(np.sum(b.measure * np.einsum("fi,fi->f", t_s, v_s)))
-        return fs, power
-
-    def interface_flux(self, grid_state):
-        """(e) Godunov fluxes at interior faces from the linearised Riemann solver."""
-        f = self.interior
-        t_L, v_L, C_L, rho_L, _ = self._side(f, f.T_L, grid_state, f.cell_L)
-        t_R, v_R, C_R, rho_R, _ = self._side(f, f.T_R, grid_state, f.cell_R)
-        Z_L, Z_R = impedance(C_L, f.normal, rho_L), impedance(C_R, f.normal, rho_R)
-        t_s, v_s = godunov_state(t_L, v_L, t_R, v_R, Z_L, Z_R)
-        flux = system.normal_flux(t_s, v_s, f.normal)
-        fs = FaceStates(t_L, v_L, C_L, rho_L, Z_L, flux,
-                        fluct_L=flux - system.normal_flux(t_L, v_L, f.normal),
-                        fluct_R=system.normal_flux(t_R, v_R, f.normal) - flux)
-        fs.C_R, fs.rho_R = C_R, rho_R
-        return fs
 
     def transverse_flux(self, interior, boundary, dt):
         """CTU [R18 eq 34-37]: each fluctuation entering a cell is split on the characteristic
@@ -257,21 +155,15 @@ class DGMPM:
         return system.join(np.einsum("fkj,fk->fj", frame, dv)[:, :, None] * self.boundary.normal[:, None, :],
                            np.einsum("fkj,fk->fj", frame, dt_))
 
+    def face_values(self, T, grid_state, cells):
+        """Side-averaged Q, F and density on a face set (Q projected from the particles)."""
+        d = self.d
+        return T @ grid_state.Q, (T @ grid_state.U)[:, : d * d].reshape(-1, d, d), T @ self.map.rho
+
     def residual(self, grid_state, time, dt):
         """M dU/dt = K^alpha F_alpha - int Phi F_N*; also returns the boundary power (W)."""
-        R = self.volume_flux(grid_state)
-        boundary, power = self.boundary_flux(grid_state, time)
-        interior = self.interface_flux(grid_state)
-        corr_int, corr_bnd = self.transverse_flux(interior, boundary, dt)
-        flux = interior.flux + corr_int
-        R -= self.interior.integrate(flux, "L")
-        R += self.interior.integrate(flux, "R")
-        R -= self.boundary.integrate(boundary.flux + corr_bnd, "L")
-        if self.ctu is not None:                   # work of the corrected boundary flux
-            F, p = system.split(boundary.flux + corr_bnd, self.d)
-            v = -np.einsum("fia,fa->fi", F, self.boundary.normal)
-            power = float(np.sum(self.boundary.measure * np.einsum("fi,fi->f", -p, v)))
-        return R, power
+        R, power = self.surface_residual(grid_state, time, dt)
+        return R + self.volume_flux(grid_state), power
 
     def advance(self, grid_state, time, dt):
         """(f) forward Euler [R18 eq 20] or Heun's RK2, both stages on the grid."""
@@ -316,49 +208,10 @@ class DGMPM:
         return state
 
     def step(self, state, dt_max=np.inf):
-        """One step; repeated with a smaller Delta t if the waves of the new state are faster
-        than the CFL condition allowed (e.g. the first step of an impact on a stiffening law)."""
         grid_state = self.project(state)
-        dt = self.time_step(state, dt_max)
-        for _ in range(4):
+
+        def attempt(dt):
             U_nodes, work = self.advance(grid_state, state.t, dt)
-            new = self.constitutive_update(state, self.back_map(U_nodes), dt)
-            dt_new = self.cfl * self.h_min / new.speed.max()
-            if dt <= dt_new * (1 + 1e-9):
-                break
-            dt = dt_new
-        self.external_work += work
-        return new
+            return self.constitutive_update(state, self.back_map(U_nodes), dt), work
 
-    def check(self, state):
-        """Stop on non-finite values or lost hyperbolicity, naming the particle; sets the wave
-        speeds of ``state`` used by the next time step."""
-        finite = np.all(np.isfinite(state.U), axis=1) & np.all(np.isfinite(state.Q), axis=1)
-        F, _ = system.split(state.U, self.d)
-        state.speed, hyperbolic = self.materials.max_speed(
-            np.where(finite[:, None, None], F, np.eye(self.d)), self.particles.material)
-        bad = ~finite | ~hyperbolic
-        if bad.any():
-            p = int(np.flatnonzero(bad)[0])
-            if not finite[p]:
-                what = "non-finite values"
-            elif np.linalg.det(F[p]) <= 0:
-                what = "inverted material (det F <= 0)"
-            else:
-                what = "loss of hyperbolicity"
-            raise InstabilityError(
-                f"{what} at step {state.step}, t = {state.t:.6g} s, particle {p} "
-                f"(X = {np.round(self.particles.X[p], 6).tolist()})",
-                step=state.step, time=state.t, particle=p)
-
-    def energy(self, state):
-        """Kinetic and stored energy (J per unit thickness in 2D, per unit area in 1D)."""
-        F, p = system.split(state.U, self.d)
-        v = p / self.particles.rho0[:, None]
-        kinetic = 0.5 * np.sum(self.particles.mass * np.sum(v * v, axis=1))
-        stored = np.sum(self.particles.volume * self.materials.energy(F, self.particles.material))
-        return kinetic, stored
-
-    @property
-    def n_dofs_total(self):
-        return self.n_dofs * system.n_components(self.d)
+        return self.step_with_cfl_guard(state, dt_max, attempt)

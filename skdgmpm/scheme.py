@@ -1,0 +1,201 @@
+"""What every Godunov-type scheme of skdgmpm shares: states, face fluxes with boundary
+conditions, stability checks, energy and the CFL-guarded step.
+
+A scheme provides ``face_values`` (the states on each side of a face set), its volume term and
+its time integration; the surface term -int Phi F_N* with the Riemann solver and the boundary
+conditions is the same for first-order DGMPM (one point per face) and DGFEM (facet Gauss
+points).
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import system
+from .bcs import FREE
+from .errors import InputError, InstabilityError
+from .faces import boundary_faces
+from .riemann import godunov_state, impedance
+
+
+@dataclass
+class ParticleState:
+    """What the particles carry at time ``t``: U = [F, p], Q = [P, v], current positions x."""
+
+    t: float
+    U: np.ndarray          # (n, d*d + d)
+    Q: np.ndarray          # (n, d*d + d)
+    x: np.ndarray          # (n, d)
+    step: int = 0
+    speed: np.ndarray = None   # (n,) fastest wave speed along the grid axes
+    dofs: np.ndarray = None    # (n_dofs, d*d + d) grid unknowns of schemes that keep them (DGFEM)
+
+    def copy(self):
+        return ParticleState(self.t, self.U.copy(), self.Q.copy(), self.x.copy(), self.step, self.speed,
+                             None if self.dofs is None else self.dofs.copy())
+
+
+@dataclass
+class GridState:
+    """Nodal U and Q (n_dofs, d*d + d)."""
+
+    U: np.ndarray
+    Q: np.ndarray
+
+
+@dataclass
+class FaceStates:
+    """Side-averaged states and linearisation on a face set (one side or both)."""
+
+    t_L: np.ndarray
+    v_L: np.ndarray
+    C_L: np.ndarray
+    rho_L: np.ndarray
+    Z_L: np.ndarray
+    flux: np.ndarray = None          # F_N* (nf, ncomp)
+    fluct_L: np.ndarray = None       # A- dU entering side L (nf, ncomp)
+    fluct_R: np.ndarray = None       # A+ dU entering side R
+
+
+def cell_values(name, cells, values, n_cells):
+    """One value per cell from per-particle values; error if a cell mixes them."""
+    out = np.full(n_cells, -1, dtype=values.dtype)
+    out[cells] = values
+    if np.any(out[cells] != values):
+        raise InputError(f"particles: a cell holds particles of different {name}")
+    return out
+
+
+class GodunovScheme:
+    """Base of the steppers: needs ``d``, ``materials``, ``bcs``, ``cell_material``,
+    ``particles`` (the points carrying the state), ``interior``, ``n_dofs``, ``cfl`` and
+    ``h_min``, and implements ``face_values``."""
+
+    face_options = {}
+    external_work = 0.0
+
+    def _setup_boundary(self, element):
+        m = self.grid.submesh
+        facets = m.boundary_facets()
+        which = np.full(m.nfacets, -1)
+        for k, (name, _) in enumerate(self.bcs):
+            if name not in m.boundaries:
+                raise InputError(f"boundary.{name}: no boundary of that name in the grid "
+                                 f"(known: {', '.join(sorted(m.boundaries))})")
+            which[m.boundaries[name]] = k
+        self.boundary = boundary_faces(m, element, facets, self.n_dofs, **self.face_options)
+        self.boundary_bc = which[self.boundary.facets]
+
+    def face_values(self, T, grid_state, cells):
+        """(Q, F, rho0) on one side of a face set: ((nf, ncomp), (nf, d, d), (nf,))."""
+        raise NotImplementedError
+
+    def _side(self, faces, T, grid_state, cells):
+        Qf, Ff, rho = self.face_values(T, grid_state, cells)
+        P, v = system.split(Qf, self.d)
+        C = self.materials.tangent(Ff, self.cell_material[cells])
+        t = np.einsum("fia,fa->fi", P, faces.normal)
+        return t, v, C, rho, Qf
+
+    def boundary_flux(self, grid_state, time):
+        """(d) ghost states -> boundary stationary states and fluxes; returns states and power."""
+        b = self.boundary
+        t_L, v_L, C, rho, Q_L = self._side(b, b.T_L, grid_state, b.cell_L)
+        Z = impedance(C, b.normal, rho)
+        t_s, v_s = t_L.copy(), v_L.copy()
+        for k, (_, bc) in [(-1, (None, None))] + list(enumerate(self.bcs)):
+            sel = self.boundary_bc == k
+            if not sel.any():
+                continue
+            t_s[sel], v_s[sel] = (bc or FREE).star(time, t_L[sel], v_L[sel], Z[sel], b.normal[sel])
+        flux = system.normal_flux(t_s, v_s, b.normal)
+        fs = FaceStates(t_L, v_L, C, rho, Z, flux,
+                        fluct_L=flux - system.normal_flux(t_L, v_L, b.normal))
+        power = float(np.sum(b.measure * np.einsum("fi,fi->f", t_s, v_s)))
+        return fs, power
+
+    def interface_flux(self, grid_state):
+        """(e) Godunov fluxes at interior faces from the linearised Riemann solver."""
+        f = self.interior
+        t_L, v_L, C_L, rho_L, _ = self._side(f, f.T_L, grid_state, f.cell_L)
+        t_R, v_R, C_R, rho_R, _ = self._side(f, f.T_R, grid_state, f.cell_R)
+        Z_L, Z_R = impedance(C_L, f.normal, rho_L), impedance(C_R, f.normal, rho_R)
+        t_s, v_s = godunov_state(t_L, v_L, t_R, v_R, Z_L, Z_R)
+        flux = system.normal_flux(t_s, v_s, f.normal)
+        fs = FaceStates(t_L, v_L, C_L, rho_L, Z_L, flux,
+                        fluct_L=flux - system.normal_flux(t_L, v_L, f.normal),
+                        fluct_R=system.normal_flux(t_R, v_R, f.normal) - flux)
+        fs.C_R, fs.rho_R = C_R, rho_R
+        return fs
+
+    def transverse_flux(self, interior, boundary, dt):
+        """Corrections of the interior and boundary fluxes (none by default)."""
+        return 0.0, 0.0
+
+    def surface_residual(self, grid_state, time, dt):
+        """-int Phi F_N* over all faces; also returns the power through the boundary (W)."""
+        R = np.zeros_like(grid_state.U)
+        boundary, power = self.boundary_flux(grid_state, time)
+        interior = self.interface_flux(grid_state)
+        corr_int, corr_bnd = self.transverse_flux(interior, boundary, dt)
+        flux = interior.flux + corr_int
+        R -= self.interior.integrate(flux, "L")
+        R += self.interior.integrate(flux, "R")
+        R -= self.boundary.integrate(boundary.flux + corr_bnd, "L")
+        if getattr(self, "ctu", None) is not None:                   # work of the corrected boundary flux
+            F, p = system.split(boundary.flux + corr_bnd, self.d)
+            v = -np.einsum("fia,fa->fi", F, self.boundary.normal)
+            power = float(np.sum(self.boundary.measure * np.einsum("fi,fi->f", -p, v)))
+        return R, power
+
+    def time_step(self, state, dt_max=np.inf):
+        """Delta t = CFL h_min / (k c_max) from the current fastest wave [R18 §5(b), L23 eq 67]."""
+        return min(self.cfl * self.h_min / (self.speed_factor * state.speed.max()), dt_max)
+
+    speed_factor = 1.0
+
+    def step_with_cfl_guard(self, state, dt_max, attempt):
+        """Run ``attempt(dt) -> (new state, boundary work)``; repeat with a smaller Delta t if the
+        waves of the new state are faster than the CFL condition allowed (e.g. the first step of
+        an impact on a stiffening law)."""
+        dt = self.time_step(state, dt_max)
+        for _ in range(4):
+            new, work = attempt(dt)
+            dt_new = self.time_step(new)
+            if dt <= dt_new * (1 + 1e-9):
+                break
+            dt = dt_new
+        self.external_work += work
+        return new
+
+    def check(self, state):
+        """Stop on non-finite values or lost hyperbolicity, naming the particle; sets the wave
+        speeds of ``state`` used by the next time step."""
+        finite = np.all(np.isfinite(state.U), axis=1) & np.all(np.isfinite(state.Q), axis=1)
+        F, _ = system.split(state.U, self.d)
+        state.speed, hyperbolic = self.materials.max_speed(
+            np.where(finite[:, None, None], F, np.eye(self.d)), self.particles.material)
+        bad = ~finite | ~hyperbolic
+        if bad.any():
+            p = int(np.flatnonzero(bad)[0])
+            if not finite[p]:
+                what = "non-finite values"
+            elif np.linalg.det(F[p]) <= 0:
+                what = "inverted material (det F <= 0)"
+            else:
+                what = "loss of hyperbolicity"
+            raise InstabilityError(
+                f"{what} at step {state.step}, t = {state.t:.6g} s, particle {p} "
+                f"(X = {np.round(self.particles.X[p], 6).tolist()})",
+                step=state.step, time=state.t, particle=p)
+
+    def energy(self, state):
+        """Kinetic and stored energy (J per unit thickness in 2D, per unit area in 1D)."""
+        F, p = system.split(state.U, self.d)
+        v = p / self.particles.rho0[:, None]
+        kinetic = 0.5 * np.sum(self.particles.mass * np.sum(v * v, axis=1))
+        stored = np.sum(self.particles.volume * self.materials.energy(F, self.particles.material))
+        return kinetic, stored
+
+    @property
+    def n_dofs_total(self):
+        return self.n_dofs * system.n_components(self.d)
