@@ -7,7 +7,10 @@ import numpy as np
 
 from .bcs import make_bc
 from .constitutive import MaterialSet
+from .dgfem import DGFEM, INTEGRATORS
 from .dgmpm import DGMPM
+from .scene import exact_solution
+from .scheme import cell_values
 from .errors import InputError, InstabilityError
 from .grid import Grid, facets_in_box, line, load_mesh, rectangle
 from .particles import Particles, fill_cells, locate, tensor_layout
@@ -135,20 +138,42 @@ def build(scene):
     cfl = float(method.get("cfl", 1.0))
     if not 0 < cfl <= 2:
         raise InputError(f"{scene.where('method.cfl')} = {cfl!r} must be in (0, 2]")
-    for key, choices in (("integrator", ("euler", "rk2")), ("transverse", ("dcu", "ctu"))):
+    name = method.get("name", "dgmpm")
+    integrators = ("euler", "rk2") if name == "dgmpm" else INTEGRATORS
+    for key, choices in (("integrator", integrators), ("transverse", ("dcu", "ctu"))):
         if key in method and method[key] not in choices:
             raise InputError(f"{scene.where(f'method.{key}')} = {method[key]!r}: expected one of "
                              f"{', '.join(choices)}")
-    stepper = DGMPM(grid, particles, MaterialSet(tuple(materials)), bcs, cfl=cfl,
-                    integrator=method.get("integrator", "euler"),
-                    transverse=method.get("transverse", "dcu"))
+    mats = MaterialSet(tuple(materials))
+    if name == "dgmpm":
+        if method.get("order", 1) != 1:
+            raise InputError(f"{scene.where('method.order')} = {method['order']!r}: dgmpm is first order")
+        stepper = DGMPM(grid, particles, mats, bcs, cfl=cfl, integrator=method.get("integrator", "euler"),
+                        transverse=method.get("transverse", "dcu"))
+    else:
+        order = method.get("order", 1)
+        if not 1 <= order <= 5:
+            raise InputError(f"{scene.where('method.order')} = {order!r} must be in 1..5")
+        cell_material = cell_values("materials", particles.cell, particles.material, grid.submesh.nelements)
+        stepper = DGFEM(grid, mats, bcs, cell_material, order=order, cfl=cfl,
+                        integrator=method.get("integrator", "rk2"))
+    n = len(stepper.particles)
     init = scene.get("initial") or {}
     v0 = _array(scene, "initial.velocity", init.get("velocity", [0.0] * d), (d,), f"{d} number(s) (m/s)")
     F0 = _array(scene, "initial.F", init.get("F", np.eye(d).tolist()), (d, d), f"{d}x{d} numbers")
+    F0, v0 = np.broadcast_to(F0, (n, d, d)).copy(), np.broadcast_to(v0, (n, d)).copy()
+    if init.get("exact"):
+        solution = exact_solution(scene)
+        if solution is None:
+            raise InputError(f"{scene.where('initial.exact')} = true needs an [exact] table")
+        fields = solution.fields(stepper.particles.X, 0.0)
+        for i in range(d):
+            v0[:, i] = fields[f"v{i + 1}"]
+            for a in range(d):
+                F0[:, i, a] = fields[f"F{i + 1}{a + 1}"]
     try:
         with np.errstate(over="ignore", invalid="ignore"):
-            initial = stepper.initial_state(np.broadcast_to(F0, (n, d, d)).copy(),
-                                            np.broadcast_to(v0, (n, d)).copy())
+            initial = stepper.initial_state(F0, v0)
         with np.errstate(over="ignore", invalid="ignore"):
             energy = stepper.energy(initial)
         if not np.all(np.isfinite(energy)):
@@ -156,7 +181,8 @@ def build(scene):
     except InstabilityError as exc:
         raise InputError(f"{scene.where('initial')}: the initial state is not admissible "
                          f"({str(exc).split(' at step')[0]})") from None
-    return Discretisation(scene, grid, particles, layout, stepper, initial)
+    return Discretisation(scene, grid, stepper.particles, layout if name == "dgmpm" else None,
+                          stepper, initial)
 
 
 def _read_points(scene, name, d):

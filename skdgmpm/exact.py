@@ -248,7 +248,72 @@ class SVKBarRiemann:
         return {"P11": self.Pi(F), "P22": 0.5 * self.lam * (F * F - 1), "v1": v, "F11": F}
 
 
-EXACT = {"elastic_bar_step": ElasticBarStep, "svk_bar_riemann": SVKBarRiemann}
+@dataclass(frozen=True, kw_only=True)
+class StandingWave2D:
+    """Standing P-wave eigenmode of a linear elastic rectangle [0, lx] x [0, ly] (plane strain)
+    with zero normal velocity and zero shear on all four sides (symmetry planes).
+
+    u = A grad(phi) / |k| cos(omega t), phi = cos(kx X) cos(ky Y), kx = m pi / lx,
+    ky = n pi / ly, omega = c_p |k|, c_p = sqrt((lam + 2 mu) / rho). The displacement is curl-free,
+    so grad u is symmetric and the linear law P = lam tr(eps) I + 2 mu eps is exact; on X = 0, lx
+    the normal displacement and the shear strain vanish (sin(kx X) = 0), likewise on Y = 0, ly.
+
+    Parameters
+    ----------
+    E, nu, rho : material (Pa, -, kg/m^3); amplitude : A (m); size : (lx, ly) (m);
+    modes : (m, n) half-wavelengths along X and Y.
+    """
+
+    E: float
+    nu: float
+    rho: float
+    amplitude: float = 1e-4
+    size: tuple = (1.0, 1.0)
+    modes: tuple = (1, 1)
+
+    def __post_init__(self):
+        for key in ("E", "rho"):
+            _check(type(self), key, getattr(self, key), lambda x: x > 0, "a number > 0")
+        _check(type(self), "nu", self.nu, lambda x: -1 < x < 0.5, "a number in (-1, 0.5)")
+        _check(type(self), "amplitude", self.amplitude, lambda x: True, "a finite number")
+
+    @property
+    def omega(self):
+        lam = self.E * self.nu / ((1 + self.nu) * (1 - 2 * self.nu))
+        mu = self.E / (2 * (1 + self.nu))
+        k = math.hypot(*self.wavenumbers)
+        return math.sqrt((lam + 2 * mu) / self.rho) * k
+
+    @property
+    def wavenumbers(self):
+        return tuple(m * math.pi / s for m, s in zip(self.modes, self.size))
+
+    def fields(self, X, t):
+        X = np.asarray(X, dtype=float)
+        if X.ndim != 2 or X.shape[1] != 2:
+            raise InputError(f"StandingWave2D: X must have shape (n, 2), got {X.shape}")
+        kx, ky = self.wavenumbers
+        k = math.hypot(kx, ky)
+        a = self.amplitude / k
+        w, t = self.omega, _time(t)
+        cx, sx = np.cos(kx * X[:, 0]), np.sin(kx * X[:, 0])
+        cy, sy = np.cos(ky * X[:, 1]), np.sin(ky * X[:, 1])
+        e11, e22 = -a * kx * kx * cx * cy * math.cos(w * t), -a * ky * ky * cx * cy * math.cos(w * t)
+        e12 = a * kx * ky * sx * sy * math.cos(w * t)
+        lam = self.E * self.nu / ((1 + self.nu) * (1 - 2 * self.nu))
+        mu = self.E / (2 * (1 + self.nu))
+        tr = e11 + e22
+        return {
+            "F11": 1 + e11, "F12": e12, "F21": e12, "F22": 1 + e22,
+            "eps11": e11, "eps12": e12, "eps22": e22,
+            "P11": lam * tr + 2 * mu * e11, "P22": lam * tr + 2 * mu * e22, "P12": 2 * mu * e12,
+            "P21": 2 * mu * e12,
+            "v1": a * kx * w * sx * cy * math.sin(w * t), "v2": a * ky * w * cx * sy * math.sin(w * t),
+        }
+
+
+EXACT = {"elastic_bar_step": ElasticBarStep, "svk_bar_riemann": SVKBarRiemann,
+         "standing_wave_2d": StandingWave2D}
 
 
 def make_exact(name, **params):

@@ -11,6 +11,22 @@ import scipy.sparse as sp
 from skfem import FacetBasis, InteriorFacetBasis
 
 
+def _point_trace(fb):
+    """(n_faces * nqp, n_dofs) trace at every facet quadrature point, and the point weights."""
+    w = fb.dx                                                      # (nf, nqp)
+    nf, nq = w.shape
+    rows, cols, vals = [], [], []
+    for k in range(fb.Nbfun):
+        phi = np.asarray(fb.basis[k][0])                           # (nf, nqp)
+        rows.append(np.arange(nf * nq))
+        cols.append(np.repeat(fb.element_dofs[k], nq))
+        vals.append(phi.ravel())
+    T = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(nf * nq, fb.N))
+    T.eliminate_zeros()
+    return T, w.ravel()
+
+
 def _average_trace(fb):
     """(n_faces, n_dofs) face-averaged trace of a facet basis, and face measures (n_faces,)."""
     w = fb.dx                                                      # (nf, nqp)
@@ -58,20 +74,32 @@ class FaceSet:
         return T.T @ (self.measure[:, None] * flux)
 
 
-def interior_faces(mesh, element):
-    fb = [InteriorFacetBasis(mesh, element, side=i) for i in (0, 1)]
-    T_L, measure = _average_trace(fb[0])
-    T_R, _ = _average_trace(fb[1])
-    normal = fb[0].normals[:, :, 0].T.copy()
-    return FaceSet(fb[0].find, normal, measure, fb[0].tind, fb[1].tind, T_L, T_R)
+def _rows(fb, pointwise):
+    """Per-row facet index, normal, cell: one row per face, or per facet quadrature point."""
+    nq = fb.dx.shape[1] if pointwise else 1
+    normal = fb.normals[:, :, :nq].reshape(fb.normals.shape[0], -1).T.copy()
+    return np.repeat(fb.find, nq), normal, np.repeat(fb.tind, nq)
 
 
-def boundary_faces(mesh, element, facets, n_dofs):
+def interior_faces(mesh, element, pointwise=False, intorder=None):
+    """Interior faces: one row per face (side averages) or per facet Gauss point (``pointwise``)."""
+    kw = {} if intorder is None else {"intorder": intorder}
+    fb = [InteriorFacetBasis(mesh, element, side=i, **kw) for i in (0, 1)]
+    trace = _point_trace if pointwise else _average_trace
+    T_L, measure = trace(fb[0])
+    T_R, _ = trace(fb[1])
+    facets, normal, cell_L = _rows(fb[0], pointwise)
+    return FaceSet(facets, normal, measure, cell_L, _rows(fb[1], pointwise)[2], T_L, T_R)
+
+
+def boundary_faces(mesh, element, facets, n_dofs, pointwise=False, intorder=None):
+    """Boundary faces ``facets`` with outward normals (rows as in `interior_faces`)."""
     facets = np.asarray(facets, dtype=np.int64)
     if len(facets) == 0:
         return FaceSet(facets, np.zeros((0, mesh.dim())), np.zeros(0), facets, facets,
                        sp.csr_matrix((0, n_dofs)))
-    fb = FacetBasis(mesh, element, facets=facets)
-    T, measure = _average_trace(fb)
-    normal = fb.normals[:, :, 0].T.copy()
-    return FaceSet(fb.find, normal, measure, fb.tind, -np.ones_like(fb.tind), T)
+    kw = {} if intorder is None else {"intorder": intorder}
+    fb = FacetBasis(mesh, element, facets=facets, **kw)
+    T, measure = (_point_trace if pointwise else _average_trace)(fb)
+    facets, normal, cell = _rows(fb, pointwise)
+    return FaceSet(facets, normal, measure, cell, -np.ones_like(cell), T)

@@ -22,6 +22,7 @@ def particle_fields(stepper, state):
         out[f"x{i + 1}"] = state.x[:, i]
         for a in range(d):
             out[f"F{i + 1}{a + 1}"] = F[:, i, a]
+            out[f"eps{i + 1}{a + 1}"] = 0.5 * (F[:, i, a] + F[:, a, i]) - (i == a)
             out[f"P{i + 1}{a + 1}"] = P[:, i, a]
     for i in range(3):
         for j in range(i, 3):

@@ -72,7 +72,7 @@ class Result:
         method = s.data["method"]
         out = {
             "case": s.name, "title": s.get("title", ""), "method": method.get("name", "dgmpm"),
-            "order": 1, "integrator": st.integrator, "transverse": st.transverse,
+            "order": int(getattr(st, "order", 1)), "integrator": st.integrator, "transverse": st.transverse,
             "cfl": st.cfl, "dim": s.dim, "cells": int(st.grid.submesh.nelements),
             "grid_cells": int(st.grid.mesh.nelements), "particles": len(self.disc.particles),
             "dofs": int(st.n_dofs_total), "steps": int(self.state.step),

@@ -26,14 +26,14 @@ SCHEMA = {
     "particles": {"per_cell": (int, list), "file": str},
     "material": {"law": str, "E": NUMBER, "nu": NUMBER, "rho": NUMBER},
     "regions": list,
-    "initial": {"velocity": list, "F": list},
+    "initial": {"velocity": list, "F": list, "exact": bool},
     "boundaries": None,
     "bc": None,
-    "method": {"name": str, "integrator": str, "transverse": str, "cfl": NUMBER},
+    "method": {"name": str, "integrator": str, "transverse": str, "cfl": NUMBER, "order": int},
     "run": {"t_end": NUMBER, "frames": int},
     "exact": None,
 }
-METHODS = ("dgmpm",)
+METHODS = ("dgmpm", "rk-dgfem")
 
 
 def _where(source, key):
@@ -54,7 +54,7 @@ def _check(table, schema, source, prefix=""):
         elif expected is None:
             if not isinstance(value, dict):
                 raise InputError(f"{_where(source, path)} = {value!r} must be a table")
-        elif not isinstance(value, expected) or isinstance(value, bool):
+        elif not isinstance(value, expected) or (isinstance(value, bool) and expected is not bool):
             names = "/".join(t.__name__ for t in np.atleast_1d(expected))
             raise InputError(f"{_where(source, path)} = {value!r} has the wrong type (expected {names})")
 
@@ -177,8 +177,10 @@ def exact_solution(scene):
     name = spec.pop("name", None)
     mat = scene.data["material"]
     params = {"E": mat.get("E"), "rho": mat.get("rho")}
-    if name == "svk_bar_riemann":
+    if name in ("svk_bar_riemann", "standing_wave_2d"):
         params["nu"] = mat.get("nu")
+    if name == "standing_wave_2d":
+        params["size"] = tuple(scene.get("grid.size", (1.0, 1.0)))
     if "load" in spec:                                   # P11 = t . N with N = -e1 at the left end
         load = spec.pop("load")
         bc = scene.get(f"bc.{load}") if isinstance(load, str) else None

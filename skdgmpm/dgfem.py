@@ -1,0 +1,190 @@
+"""RK-DGFEM: broken Q_P Lagrange space with Gauss quadrature, the baseline of [L23].
+
+The semi-discrete operator is the DGMPM one [L23 eq 27-33] with Gauss points instead of material
+points: consistent mass (block diagonal, inverted once per cell), volume term
+``sum_q w_q dPhi_i/dX_alpha F_alpha(Q(X_q))`` with the law evaluated at the Gauss points, and
+Godunov fluxes at every facet Gauss point from the same Riemann solver and boundary conditions.
+Time integration: TVD-RK2 (Heun) or classical RK4; Delta t = CFL h_min / ((2P + 1) c_max)
+[L23 eq 67].
+
+The Gauss points play the part of the particles for everything downstream (fields, energy,
+errors, VTK output): ``self.particles`` holds them with their quadrature weights as volumes.
+"""
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from skfem import (CellBasis, ElementDG, ElementLineP1, ElementLineP2, ElementQuad1, ElementQuad2,
+                   ElementQuadDG, ElementQuadP)
+
+from . import forms, system
+from .elements import ElementLineLagrange
+from .errors import InputError
+from .faces import interior_faces
+from .particles import Particles
+from .scheme import GodunovScheme, GridState, ParticleState
+
+INTEGRATORS = ("rk2", "rk4")
+
+
+def dg_element(d, order):
+    """Broken tensor-product element Q_P on lines (d = 1) or quads (d = 2): Lagrange for P <= 2,
+    above, scikit-fem's ElementQuadP (whose basis is no partition of unity) and, in 1D,
+    `ElementLineLagrange`."""
+    if d == 1:
+        return ElementDG({1: ElementLineP1, 2: ElementLineP2}.get(order, lambda: ElementLineLagrange(order))())
+    return ElementQuadDG({1: ElementQuad1, 2: ElementQuad2}.get(order, lambda: ElementQuadP(order))())
+
+
+def _point_matrix(basis, values):
+    """Sparse (n_cells * nq, n_dofs) from per-basis-function values (nb, n_cells, nq)."""
+    nb, nel, nq = values.shape
+    rows = np.broadcast_to(np.arange(nel * nq).reshape(1, nel, nq), values.shape)
+    cols = np.broadcast_to(basis.element_dofs[:, :, None], values.shape)
+    return sp.csr_matrix((values.ravel(), (rows.ravel(), cols.ravel())), shape=(nel * nq, basis.N))
+
+
+@dataclass
+class DGFEM(GodunovScheme):
+    """RK-DGFEM of order ``order`` (P) on the active cells of ``grid``.
+
+    Parameters
+    ----------
+    grid : Grid; materials : MaterialSet; bcs : list of (name, BoundaryCondition)
+    cell_material : (n_cells,) material index of each active cell
+    order : P in 1..3 (any P >= 1 works); cfl : Courant number of L23 eq 67
+    integrator : "rk2" (TVD-RK2) | "rk4"
+    """
+
+    grid: object
+    materials: object
+    bcs: list
+    cell_material: np.ndarray
+    order: int = 1
+    cfl: float = 0.5
+    integrator: str = "rk2"
+    stages: tuple = ("time_step", "volume_flux", "boundary_flux", "interface_flux", "advance",
+                     "evaluate_points")
+    external_work: float = field(default=0.0, init=False)
+    transverse: str = "none"
+
+    def __post_init__(self):
+        if self.integrator not in INTEGRATORS:
+            raise InputError(f"method.integrator = {self.integrator!r}: expected one of {', '.join(INTEGRATORS)}")
+        if not (isinstance(self.order, int) and self.order >= 1):
+            raise InputError(f"method.order = {self.order!r} must be an integer >= 1")
+        g = self.grid
+        self.d = d = g.dim
+        q = 2 * self.order + 1                      # exact for the mass matrix of Q_P
+        element = dg_element(d, self.order)
+        basis = CellBasis(g.submesh, element, intorder=q)
+        self.basis = basis
+        self.n_dofs = basis.N
+        self.nb = basis.Nbfun
+        nel, nq = basis.dx.shape
+        phi = np.array([np.asarray(basis.basis[k][0]) for k in range(self.nb)])        # (nb, nel, nq)
+        grad = np.array([np.asarray(basis.basis[k][0].grad) for k in range(self.nb)])  # (nb, d, nel, nq)
+        self.B = _point_matrix(basis, phi)
+        self.D = tuple(_point_matrix(basis, grad[:, a] * basis.dx[None]) for a in range(d))
+        # the consistent mass is block diagonal (broken space): invert each cell's block once
+        self.cell_dofs = basis.element_dofs.T                                           # (nel, nb)
+        dof_cell = np.empty(basis.N, dtype=np.int64)
+        dof_local = np.empty(basis.N, dtype=np.int64)
+        dof_cell[self.cell_dofs] = np.arange(nel)[:, None]
+        dof_local[self.cell_dofs] = np.arange(self.nb)[None, :]
+        mass = forms.mass.assemble(basis).tocoo()
+        blocks = np.zeros((nel, self.nb, self.nb))
+        np.add.at(blocks, (dof_cell[mass.row], dof_local[mass.row], dof_local[mass.col]), mass.data)
+        self.mass_inv = np.linalg.inv(blocks)
+        rho_cell = np.array([m.rho for m in self.materials.materials])[self.cell_material]
+        X = np.asarray(basis.global_coordinates()).reshape(d, -1).T
+        cell = np.repeat(np.arange(nel), nq)
+        self.particles = Particles(X, np.zeros_like(X), cell, basis.dx.ravel(), rho_cell[cell],
+                                   self.cell_material[cell])
+        self.rho_point = self.particles.rho0
+        self.h_min = float(g.cell_sizes().min())
+        self.speed_factor = 2 * self.order + 1
+        self.face_options = {"pointwise": True, "intorder": q}
+        self.interior = interior_faces(g.submesh, element, pointwise=True, intorder=q)
+        self.rho_cell = rho_cell
+        self._setup_boundary(element)
+
+    # ---------------------------------------------------------------- operators
+    def apply_mass_inverse(self, R):
+        """M^-1 R with the per-cell inverse blocks."""
+        Rc = R[self.cell_dofs]                                   # (nel, nb, nc)
+        out = np.empty_like(R)
+        out[self.cell_dofs] = np.einsum("ekl,elc->ekc", self.mass_inv, Rc)
+        return out
+
+    def project(self, U_points):
+        """L2 projection of point values onto the DG space (Gauss weights)."""
+        return self.apply_mass_inverse(self.B.T @ (self.particles.volume[:, None] * U_points))
+
+    def point_state(self, U, cells, rho):
+        """Q from U pointwise: P = P(F) with each cell's law, v = p / rho0."""
+        d = self.d
+        F, p = system.split(U, d)
+        return system.join(self.materials.stress(F, self.cell_material[cells]), p / rho[:, None])
+
+    def face_values(self, T, grid_state, cells):
+        d = self.d
+        U = T @ grid_state.U
+        rho = self.rho_cell[cells]          # not a trace: ElementQuadP's basis is no partition of unity
+        return self.point_state(U, cells, rho), U[:, : d * d].reshape(-1, d, d), rho
+
+    # ---------------------------------------------------------------- stages
+    def volume_flux(self, U_dofs):
+        """sum_q w_q dPhi/dX_alpha F_alpha(Q(X_q)), the law evaluated at the Gauss points."""
+        d = self.d
+        Q = self.point_state(self.B @ U_dofs, self.particles.cell, self.rho_point)
+        P, v = system.split(Q, d)
+        R = np.zeros_like(U_dofs)
+        for a, D in enumerate(self.D):
+            flux = np.zeros((len(Q), d, d))
+            flux[:, :, a] = -v
+            R += D.T @ system.join(flux, -P[:, :, a])
+        return R
+
+    def rate(self, U_dofs, time, dt):
+        """dU/dt = M^-1 (volume + surface terms) and the boundary power."""
+        R, power = self.surface_residual(GridState(U_dofs, None), time, dt)
+        return self.apply_mass_inverse(R + self.volume_flux(U_dofs)), power
+
+    def advance(self, U, time, dt):
+        """TVD-RK2 (Heun) or classical RK4; returns new dofs and the boundary work."""
+        k1, p1 = self.rate(U, time, dt)
+        if self.integrator == "rk2":
+            U1 = U + dt * k1
+            k2, p2 = self.rate(U1, time + dt, dt)
+            return 0.5 * (U + U1 + dt * k2), 0.5 * dt * (p1 + p2)
+        k2, p2 = self.rate(U + 0.5 * dt * k1, time + 0.5 * dt, dt)
+        k3, p3 = self.rate(U + 0.5 * dt * k2, time + 0.5 * dt, dt)
+        k4, p4 = self.rate(U + dt * k3, time + dt, dt)
+        return U + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4), dt / 6 * (p1 + 2 * p2 + 2 * p3 + p4)
+
+    def evaluate_points(self, state, dofs, dt):
+        """State at the Gauss points from the dofs; positions advanced with the new velocity."""
+        U = self.B @ dofs
+        Q = self.point_state(U, self.particles.cell, self.rho_point)
+        v = Q[:, self.d * self.d:]
+        new = ParticleState(state.t + dt, U, Q, state.x + dt * v, state.step + 1, dofs=dofs)
+        self.check(new)
+        return new
+
+    # ---------------------------------------------------------------- driver-facing
+    def initial_state(self, F, v, t=0.0):
+        """From F (n, d, d) and v (n, d) at the Gauss points: L2 projection onto the DG space."""
+        U = system.join(F, self.rho_point[:, None] * v)
+        dofs = self.project(U)
+        state = ParticleState(t, self.B @ dofs, None, self.particles.X.copy(), dofs=dofs)
+        state.Q = self.point_state(state.U, self.particles.cell, self.rho_point)
+        self.check(state)
+        return state
+
+    def step(self, state, dt_max=np.inf):
+        def attempt(dt):
+            dofs, work = self.advance(state.dofs, state.t, dt)
+            return self.evaluate_points(state, dofs, dt), work
+
+        return self.step_with_cfl_guard(state, dt_max, attempt)
