@@ -158,7 +158,7 @@ def test_svk_zero_load_is_rest():
 
 # ---------------------------------------------------------------- registry, errors, norms
 def test_registry():
-    assert set(EXACT) == {"elastic_bar_step", "svk_bar_riemann"}
+    assert set(EXACT) == {"elastic_bar_step", "svk_bar_riemann", "standing_wave_2d"}
     b = make_exact("elastic_bar_step", length=6.0, traction=-T, **STEEL)
     assert isinstance(b, ElasticBarStep)
     with pytest.raises(AttributeError):
@@ -204,3 +204,36 @@ def test_error_norms():
     assert error_norms(ex, ex, w) == {"L1_rel": 0.0, "L2_rel": 0.0, "Linf": 0.0}
     with pytest.raises(InputError):
         error_norms(num, ex, w[:2])
+
+
+def test_standing_wave_solves_the_equations_and_the_symmetry_conditions():
+    """Finite differences of StandingWave2D: rho dv/dt = div P, dF/dt = grad v, and on every side
+    of the unit square zero normal velocity and zero shear stress."""
+    from skdgmpm.exact import StandingWave2D
+
+    sol = StandingWave2D(E=2e11, nu=0.3, rho=7800.0, amplitude=1e-4, size=(1.0, 1.0), modes=(1, 1))
+    rng = np.random.default_rng(0)
+    X = rng.uniform(0.1, 0.9, (20, 2))
+    t, h, dt = 3e-5, 1e-6, 1e-10
+    f = sol.fields(X, t)
+
+    def d(field, axis=None):
+        if axis is None:
+            return (sol.fields(X, t + dt)[field] - sol.fields(X, t - dt)[field]) / (2 * dt)
+        e = np.zeros(2)
+        e[axis] = h
+        return (sol.fields(X + e, t)[field] - sol.fields(X - e, t)[field]) / (2 * h)
+
+    scale_p = np.abs(f["P11"]).max() * np.pi
+    for i in (1, 2):
+        div = d(f"P{i}1", 0) + d(f"P{i}2", 1)
+        assert np.allclose(7800.0 * d(f"v{i}"), div, atol=1e-6 * scale_p)
+        for a in (1, 2):
+            assert np.allclose(d(f"F{i}{a}"), d(f"v{i}", a - 1), atol=1e-6 * np.abs(f["v1"]).max() * np.pi)
+    s = np.linspace(0, 1, 7)
+    for side in (np.column_stack([0 * s, s]), np.column_stack([1 + 0 * s, s])):
+        g = sol.fields(side, t)
+        assert np.allclose(g["v1"], 0, atol=1e-12) and np.allclose(g["P12"], 0, atol=1e-3)
+    for side in (np.column_stack([s, 0 * s]), np.column_stack([s, 1 + 0 * s])):
+        g = sol.fields(side, t)
+        assert np.allclose(g["v2"], 0, atol=1e-12) and np.allclose(g["P21"], 0, atol=1e-3)
