@@ -49,6 +49,26 @@ def _cmd_stability(args):
     return 0
 
 
+def _cmd_converge(args):
+    from pathlib import Path
+
+    from . import study
+
+    out = Path(args.out if args.out is not None else f"runs/converge_{_stem(args.scene)}")
+    if out.exists() and any(out.iterdir()) and not args.force:
+        raise InputError(f"--out {out}: directory exists and is not empty (use --force to replace it)")
+    rows = study.convergence(args.scene, [m for m in args.methods.split(",") if m],
+                             study._int_list(args.orders, "--orders"), study._int_list(args.cells, "--cells"),
+                             overrides=args.set, fields=[f for f in (args.fields or "").split(",") if f] or None,
+                             progress=not args.quiet)
+    print(study.format_table(rows))
+    out.mkdir(parents=True, exist_ok=True)
+    study.write_csv(out / "convergence.csv", rows)
+    study.plot(rows, out)
+    print(f"-> {out}/convergence.csv, error_vs_h.png, error_vs_time.png")
+    return 0
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="skdgmpm", description="DGMPM solver for impacts on solids")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -61,6 +81,19 @@ def main(argv=None):
     p.add_argument("--force", action="store_true", help="replace an existing output directory")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_run)
+
+    p = sub.add_parser("converge", help="convergence study against a scene's exact solution")
+    p.add_argument("scene", help="scene with an exact solution, e.g. standing_wave_2d")
+    p.add_argument("--methods", default="dgmpm,rk-dgfem",
+                   help="comma-separated: dgmpm, rk-dgfem; method/integrator picks a time integrator")
+    p.add_argument("--orders", default="1,2,3", help="orders P of the high-order methods")
+    p.add_argument("--cells", default="4,8,16", help="cells per direction")
+    p.add_argument("--fields", default=None, help="fields to report (default: all of the exact solution)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene key")
+    p.add_argument("--out", default=None, help="output directory (default runs/converge_SCENE)")
+    p.add_argument("--force", action="store_true", help="replace an existing output directory")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_converge)
 
     p = sub.add_parser("list", help="list the scenes")
     p.set_defaults(func=_cmd_list)

@@ -1,0 +1,161 @@
+"""Convergence studies: one scene, several methods, orders and grids; errors against the scene's
+exact solution, observed rates, wall time and dofs (speed against error)."""
+import csv
+import sys
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import InputError
+from .run import run
+from .scene import load_scene
+
+DEFAULT_INTEGRATOR = {"dgmpm": "euler", "rk-dgfem": "rk4"}
+
+
+@dataclass(frozen=True)
+class Variant:
+    """A method with its options, written ``name`` or ``name/integrator`` (e.g. rk-dgfem/rk2)."""
+
+    name: str
+    integrator: str
+
+    @classmethod
+    def parse(cls, text):
+        name, _, integrator = text.partition("/")
+        if name not in DEFAULT_INTEGRATOR:
+            raise InputError(f"--methods: {name!r} is not a method (known: {', '.join(DEFAULT_INTEGRATOR)})")
+        return cls(name, integrator)
+
+    @property
+    def label(self):
+        return f"{self.name}/{self.integrator}"
+
+
+def _int_list(text, option):
+    try:
+        values = [int(v) for v in str(text).split(",") if v.strip()]
+    except ValueError:
+        raise InputError(f"{option} {text!r}: expected comma-separated integers") from None
+    if not values or min(values) < 1:
+        raise InputError(f"{option} {text!r}: expected positive integers")
+    return values
+
+
+def convergence(scene_name, methods, orders, cells, overrides=(), fields=None, progress=True):
+    """Run every (method, order, grid) and return one row per run.
+
+    Rows: method, order, cells, h, dofs, steps, wall_s, and ``L2_<field>`` (relative L2 error at
+    the method's points: particles for DGMPM, Gauss points for DGFEM) plus ``rate_<field>``
+    (observed order against the previous grid of the same method and order).
+    """
+    base = load_scene(scene_name, overrides)
+    if base.get("exact") is None:
+        raise InputError(f"{base.where('exact')}: a convergence study needs a scene with an exact solution")
+    if "mesh" in base.data["grid"]:
+        raise InputError(f"{base.where('grid.mesh')}: convergence studies refine generated grids only")
+    scene_method = base.data["method"]
+
+    def resolved(v):            # the scene's integrator for its own method, else the default
+        if v.integrator:
+            return v
+        same = scene_method.get("name", "dgmpm") == v.name and "integrator" in scene_method
+        return Variant(v.name, scene_method["integrator"] if same else DEFAULT_INTEGRATOR[v.name])
+
+    variants = [resolved(Variant.parse(m)) for m in methods]
+    runs = [(v, p, n) for v in variants for p in (orders if v.name != "dgmpm" else [1]) for n in cells]
+    bar = _bar(len(runs), progress)
+    rows = []
+    size = base.get("grid.size") or [base.get("grid.length")]
+    for v, p, n in runs:
+        bar.set_description(f"{v.label} P{p} {n} cells")
+        grid = f"grid.cells=[{n}, {n}]" if base.dim == 2 else f"grid.cells={n}"
+        result = run(base, [f'method.name="{v.name}"', f'method.integrator="{v.integrator}"',
+                            f"method.order={p}", grid], progress=False)
+        if result.status != "ok":
+            raise InputError(f"{v.label} P{p} with {n} cells stopped: {result.message}")
+        summary = result.summary()
+        row = {"method": v.label, "order": p, "cells": n, "h": float(size[0]) / n,
+               "dofs": summary["dofs"], "steps": summary["steps"], "wall_s": summary["wall_s"]}
+        for name in fields or result.errors:
+            if name not in result.errors:
+                raise InputError(f"--fields: {name!r} is not a field of the exact solution "
+                                 f"(known: {', '.join(result.errors)})")
+            row[f"L2_{name}"] = result.errors[name]["L2_rel"]
+        rows.append(row)
+        bar.update()
+    bar.close()
+    _rates(rows)
+    return rows
+
+
+def _rates(rows):
+    previous = {}
+    for row in rows:
+        key = (row["method"], row["order"])
+        for name in [k[3:] for k in row if k.startswith("L2_")]:
+            before = previous.get(key)
+            row[f"rate_{name}"] = (float(np.log(before[f"L2_{name}"] / row[f"L2_{name}"]) /
+                                         np.log(before["h"] / row["h"])) if before else float("nan"))
+        previous[key] = row
+
+
+def format_table(rows):
+    fields = [k[3:] for k in rows[0] if k.startswith("L2_")]
+    head = f"{'method':<16}{'P':>2}{'cells':>6}{'h':>9}{'dofs':>8}{'wall s':>8}"
+    head += "".join(f"{'L2 ' + f:>12}{'rate':>6}" for f in fields)
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        line = f"{r['method']:<16}{r['order']:>2}{r['cells']:>6}{r['h']:>9.4f}{r['dofs']:>8}{r['wall_s']:>8.2f}"
+        line += "".join(f"{r['L2_' + f]:>12.3e}{r['rate_' + f]:>6.2f}" for f in fields)
+        lines.append(line)
+    return "\n".join(lines)
+
+
+def write_csv(path, rows):
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+
+
+def plot(rows, folder):
+    """error_vs_h.png and error_vs_time.png (speed against error), one line per method/order."""
+    import matplotlib
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    fields = [k[3:] for k in rows[0] if k.startswith("L2_")]
+    groups = {}
+    for r in rows:
+        groups.setdefault((r["method"], r["order"]), []).append(r)
+    for xkey, name, xlabel in (("h", "error_vs_h.png", "h (m)"), ("wall_s", "error_vs_time.png", "wall time (s)")):
+        fig, axes = plt.subplots(1, len(fields), figsize=(4.2 * len(fields), 3.6), squeeze=False)
+        for ax, f in zip(axes[0], fields):
+            for (method, order), rs in groups.items():
+                ax.loglog([r[xkey] for r in rs], [r[f"L2_{f}"] for r in rs], "o-", label=f"{method} P{order}")
+            ax.set_xlabel(xlabel)
+            ax.set_ylabel(f"relative L2 error of {f}")
+            ax.grid(True, which="both", alpha=0.3)
+        axes[0][0].legend(fontsize=7)
+        fig.tight_layout()
+        fig.savefig(folder / name, dpi=110)
+        plt.close(fig)
+
+
+class _Quiet:
+    def set_description(self, _):
+        pass
+
+    def update(self, n=1):
+        pass
+
+    def close(self):
+        pass
+
+
+def _bar(total, enabled):
+    if not enabled:
+        return _Quiet()
+    from tqdm.auto import tqdm
+    return tqdm(total=total, unit="run", file=sys.stderr, leave=False)

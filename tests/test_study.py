@@ -1,0 +1,41 @@
+"""`skdgmpm converge`: table, CSV and plots of a convergence study against an exact solution."""
+import csv
+
+import numpy as np
+import pytest
+
+from skdgmpm.cli import main
+from skdgmpm.errors import InputError
+from skdgmpm.study import convergence
+
+
+def test_converge_command_writes_table_csv_and_plots(tmp_path, capsys):
+    out = tmp_path / "study"
+    rc = main(["converge", "standing_wave_2d", "--methods", "dgmpm,rk-dgfem", "--orders", "1,2",
+               "--cells", "4,8", "--fields", "eps11,P11,v1", "--out", str(out), "--quiet"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "rk-dgfem/rk4" in text and "dgmpm/euler" in text
+    rows = list(csv.DictReader(open(out / "convergence.csv")))
+    assert len(rows) == 2 + 2 * 2                            # dgmpm has order 1 only
+    assert {"method", "order", "cells", "h", "dofs", "wall_s", "L2_P11", "rate_P11"} <= set(rows[0])
+    p2 = [r for r in rows if r["method"] == "rk-dgfem/rk4" and r["order"] == "2"]
+    assert float(p2[1]["rate_P11"]) > 2.8
+    for name in ("error_vs_h.png", "error_vs_time.png"):
+        assert (out / name).stat().st_size > 10_000
+
+
+def test_rates_are_computed_between_successive_grids():
+    rows = convergence("standing_wave_2d", ["rk-dgfem/rk2"], [1], [4, 8], fields=["P11"], progress=False)
+    expected = np.log2(rows[0]["L2_P11"] / rows[1]["L2_P11"])
+    assert np.isnan(rows[0]["rate_P11"]) and np.isclose(rows[1]["rate_P11"], expected)
+
+
+@pytest.mark.parametrize("args, match", [
+    (("bar_elastic_1d", ["ader"], [1], [4]), "not a method"),
+    (("partial_impact_2d", ["dgmpm"], [1], [4]), "exact"),
+    (("standing_wave_2d", ["dgmpm"], [1], [4], (), ["sigma99"]), "not a field"),
+])
+def test_bad_study_input(args, match):
+    with pytest.raises(InputError, match=match):
+        convergence(*args, progress=False)
