@@ -7,6 +7,7 @@ import numpy as np
 
 from .bcs import make_bc
 from .constitutive import MaterialSet
+from .ader import ADERDGFEM
 from .dgfem import DGFEM, INTEGRATORS
 from .dgmpm import DGMPM
 from .scene import exact_solution
@@ -139,9 +140,10 @@ def build(scene):
     if not 0 < cfl <= 2:
         raise InputError(f"{scene.where('method.cfl')} = {cfl!r} must be in (0, 2]")
     name = method.get("name", "dgmpm")
-    integrators = ("euler", "rk2") if name == "dgmpm" else INTEGRATORS
+    integrators = {"dgmpm": ("euler", "rk2"), "rk-dgfem": INTEGRATORS}.get(name)
     for key, choices in (("integrator", integrators), ("transverse", ("dcu", "ctu"))):
-        if key in method and method[key] not in choices:
+        # ADER methods are their own time integrator: a scene's integrator key is ignored
+        if choices is not None and key in method and method[key] not in choices:
             raise InputError(f"{scene.where(f'method.{key}')} = {method[key]!r}: expected one of "
                              f"{', '.join(choices)}")
     mats = MaterialSet(tuple(materials))
@@ -155,8 +157,11 @@ def build(scene):
         if not 1 <= order <= 5:
             raise InputError(f"{scene.where('method.order')} = {order!r} must be in 1..5")
         cell_material = cell_values("materials", particles.cell, particles.material, grid.submesh.nelements)
-        stepper = DGFEM(grid, mats, bcs, cell_material, order=order, cfl=cfl,
-                        integrator=method.get("integrator", "rk2"))
+        if name == "rk-dgfem":
+            stepper = DGFEM(grid, mats, bcs, cell_material, order=order, cfl=cfl,
+                            integrator=method.get("integrator", "rk2"))
+        else:
+            stepper = ADERDGFEM(grid, mats, bcs, cell_material, order=order, cfl=cfl)
     n = len(stepper.particles)
     init = scene.get("initial") or {}
     v0 = _array(scene, "initial.velocity", init.get("velocity", [0.0] * d), (d,), f"{d} number(s) (m/s)")

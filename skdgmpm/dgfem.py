@@ -84,6 +84,7 @@ class DGFEM(GodunovScheme):
         nel, nq = basis.dx.shape
         phi = np.array([np.asarray(basis.basis[k][0]) for k in range(self.nb)])        # (nb, nel, nq)
         grad = np.array([np.asarray(basis.basis[k][0].grad) for k in range(self.nb)])  # (nb, d, nel, nq)
+        self._phi, self._grad = phi, grad
         self.B = _point_matrix(basis, phi)
         self.D = tuple(_point_matrix(basis, grad[:, a] * basis.dx[None]) for a in range(d))
         # the consistent mass is block diagonal (broken space): invert each cell's block once
@@ -128,18 +129,24 @@ class DGFEM(GodunovScheme):
         return system.join(self.materials.stress(F, self.cell_material[cells]), p / rho[:, None])
 
     def face_values(self, T, grid_state, cells):
+        """Traces of U (and of Q when the state carries it, as the ADER predictor does; otherwise
+        the law is evaluated at the facet points)."""
         d = self.d
         U = T @ grid_state.U
         rho = self.rho_cell[cells]          # not a trace: ElementQuadP's basis is no partition of unity
-        return self.point_state(U, cells, rho), U[:, : d * d].reshape(-1, d, d), rho
+        Q = self.point_state(U, cells, rho) if grid_state.Q is None else T @ grid_state.Q
+        return Q, U[:, : d * d].reshape(-1, d, d), rho
 
     # ---------------------------------------------------------------- stages
     def volume_flux(self, U_dofs):
         """sum_q w_q dPhi/dX_alpha F_alpha(Q(X_q)), the law evaluated at the Gauss points."""
+        return self.volume_flux_points(self.point_state(self.B @ U_dofs, self.particles.cell, self.rho_point))
+
+    def volume_flux_points(self, Q):
+        """The volume term from Q at the Gauss points (n_points, ncomp)."""
         d = self.d
-        Q = self.point_state(self.B @ U_dofs, self.particles.cell, self.rho_point)
         P, v = system.split(Q, d)
-        R = np.zeros_like(U_dofs)
+        R = np.zeros((self.n_dofs, Q.shape[1]))
         for a, D in enumerate(self.D):
             flux = np.zeros((len(Q), d, d))
             flux[:, :, a] = -v

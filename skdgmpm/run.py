@@ -82,6 +82,10 @@ class Result:
         }
         if self.message:
             out["message"] = self.message
+        picard = getattr(st, "picard", None)
+        if picard is not None:
+            out["picard"] = {"mean_iterations": picard.mean, "max_iterations": picard.max,
+                             "not_converged_steps": picard.not_converged}
         energy = {k: float(v[-1]) for k, v in self.history.items() if k not in ("step", "t")}
         energy["balance_change"] = float(self.history["balance"][-1] - self.history["balance"][0])
         out["energy"] = energy

@@ -33,7 +33,7 @@ SCHEMA = {
     "run": {"t_end": NUMBER, "frames": int},
     "exact": None,
 }
-METHODS = ("dgmpm", "rk-dgfem")
+METHODS = ("dgmpm", "rk-dgfem", "ader-dgfem")
 
 
 def _where(source, key):

@@ -1,0 +1,64 @@
+"""ADER-DGFEM: space-time predictor (Picard, nilpotency for linear problems) and convergence."""
+import numpy as np
+import pytest
+
+from skdgmpm.ader import time_matrices
+from skdgmpm.build import build
+from skdgmpm.run import run
+from skdgmpm.scene import load_scene
+
+
+def ader(order, cells, extra=()):
+    return run("standing_wave_2d", ['method.name="ader-dgfem"', f"method.order={order}",
+                                    f"grid.cells=[{cells},{cells}]", "method.cfl=0.5", *extra], progress=False)
+
+
+@pytest.mark.parametrize("order", [1, 2, 3])
+def test_standing_wave_rates_are_p_plus_1(order, record_property):
+    """SPTP against the exact eigenmode: L2 rates of eps11, P11, v1 >= P + 1 - 0.2 (L23 §5.1)."""
+    e4, e8 = ader(order, 4).errors, ader(order, 8).errors
+    rates = {k: np.log2(e4[k]["L2_rel"] / e8[k]["L2_rel"]) for k in ("eps11", "P11", "v1")}
+    record_property("rates", rates)
+    assert all(r >= order + 1 - 0.2 for r in rates.values()), rates
+
+
+@pytest.mark.parametrize("order", [1, 2, 3])
+def test_time_matrix_integrates_polynomials_below_degree_p(order):
+    """The weak-in-time predictor of du/dt = -f with f = tau^k gives u = 1 - tau^(k+1)/(k+1) at
+    the nodes whenever that lies in the time space (k < P): T f = int_0^tau f."""
+    tau, w, T = time_matrices(order)
+    for k in range(order):
+        assert np.allclose(T @ tau ** k, tau ** (k + 1) / (k + 1), atol=1e-13)
+    assert np.isclose(w.sum(), 1.0)
+
+
+@pytest.mark.parametrize("scene, cells, index", [("bar_elastic_1d", "grid.cells=4", lambda p: p),
+                                                  ("standing_wave_2d", "grid.cells=[3,3]", lambda p: 2 * p)])
+@pytest.mark.parametrize("order", [1, 2, 3])
+def test_picard_is_exact_after_the_nilpotency_index_for_a_linear_problem(scene, cells, index, order):
+    """Linear elasticity: each Picard iteration multiplies the error by dt T (x) L, and L (the
+    divergence of the linear flux on a cell's polynomials) is nilpotent, L^(P+1) = 0 in 1D and
+    L^(2P+1) = 0 on 2D tensor spaces. The constant guess u_hat = U^n already errs by one factor
+    dt T L, so the predictor is exact (to round-off, against a converged solve) after P iterations
+    in 1D and 2P in 2D, not one earlier; iteration P + 1 (resp. 2P + 1) confirms convergence,
+    which is L23's "P + 1 iterations" (§4.3)."""
+    disc = build(load_scene(scene, ['method.name="ader-dgfem"', f"method.order={order}", cells]))
+    st = disc.stepper
+    rng = np.random.default_rng(order)
+    d = st.d
+    U = disc.initial.U + 1e-3 * rng.standard_normal(disc.initial.U.shape) * np.r_[np.ones(d * d), 4e7 * np.ones(d)]
+    dt = st.time_step(disc.initial)
+    st.picard_guess, st.picard_tol = "constant", 0.0
+
+    def predict(n):
+        if n == 0:                                   # the guess itself
+            return np.broadcast_to(U.reshape(1, *exact.shape[1:]), exact.shape)
+        st.picard_max = n
+        return st.predictor(U, dt)[0]
+
+    st.picard_max = 4 * order + 4
+    exact = st.predictor(U, dt)[0]
+    scale = np.abs(exact).max(axis=(0, 1, 2))
+    err = lambda u: np.max(np.abs(u - exact) / scale)
+    assert err(predict(index(order))) < 1e-12
+    assert err(predict(index(order) - 1)) > 1e-9
