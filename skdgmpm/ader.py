@@ -91,24 +91,24 @@ class ADERDGFEM(DGFEM):
             self.picard_max = 2 * self.order + 2
 
     # ---------------------------------------------------------------- predictor
-    def _divergence(self, Q):
-        """sum_alpha D_alpha F_alpha(Q) at the points; Q (..., nel, nq, nc)."""
+    def _divergence(self, Q, D=None):
+        """sum_alpha D_alpha F_alpha(Q) at the points; Q (..., nel, nq, nc), D (d, nel, nq, nq)."""
         d = self.d
+        D = self.D_points if D is None else D
         P, v = Q[..., : d * d], Q[..., d * d:]
         out = np.zeros_like(Q)
         for a in range(d):
-            out[..., a: d * d: d] -= np.einsum("eqr,...erc->...eqc", self.D_points[a], v)
-            out[..., d * d:] -= np.einsum("eqr,...erc->...eqc", self.D_points[a], P[..., a::d])
+            out[..., a: d * d: d] -= np.einsum("eqr,...erc->...eqc", D[a], v)
+            out[..., d * d:] -= np.einsum("eqr,...erc->...eqc", D[a], P[..., a::d])
         return out
 
-    def _law(self, U):
-        """Q from U at (..., nel, nq, nc) points."""
+    def _law(self, U, points=None):
+        """Q from U at (..., n_points, nc) values at ``points`` (default: the Gauss points)."""
+        points = points or self.gauss
         shape = U.shape
         flat = U.reshape(-1, shape[-1])
-        n_rep = flat.shape[0] // len(self.particles)
-        cells = np.tile(self.particles.cell, n_rep)
-        rho = np.tile(self.rho_point, n_rep)
-        return self.point_state(flat, cells, rho).reshape(shape)
+        n_rep = flat.shape[0] // len(points)
+        return self.point_state(flat, np.tile(points.cell, n_rep), np.tile(points.rho0, n_rep)).reshape(shape)
 
     def predictor(self, U_points, dt):
         """Space-time predictor: (u_hat, q_hat) of shape (P+1, nel, nq, nc) and the iterations."""
@@ -119,8 +119,8 @@ class ADERDGFEM(DGFEM):
             u_hat = u_hat - dt * self.tau[:, None, None, None] * self._divergence(self._law(U))[None]
         d = self.d                                  # change measured per block (F, p)
         scale = np.ones(U.shape[-1])
-        scale[: d * d] = np.abs(U[..., : d * d]).max() + 1e-300
-        scale[d * d:] = np.abs(U[..., d * d:]).max() + 1e-300
+        scale[: d * d] = np.abs(U[..., : d * d]).max() or 1.0
+        scale[d * d:] = np.abs(U[..., d * d:]).max() or 1.0
         for it in range(1, self.picard_max + 1):
             q_hat = self._law(u_hat)
             div = self._divergence(q_hat)

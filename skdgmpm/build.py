@@ -8,6 +8,7 @@ import numpy as np
 from .bcs import make_bc
 from .constitutive import MaterialSet
 from .ader import ADERDGFEM
+from .ader_dgmpm import ADERDGMPM
 from .dgfem import DGFEM, INTEGRATORS
 from .dgmpm import DGMPM
 from .scene import exact_solution
@@ -160,8 +161,11 @@ def build(scene):
         if name == "rk-dgfem":
             stepper = DGFEM(grid, mats, bcs, cell_material, order=order, cfl=cfl,
                             integrator=method.get("integrator", "rk2"))
-        else:
+        elif name == "ader-dgfem":
             stepper = ADERDGFEM(grid, mats, bcs, cell_material, order=order, cfl=cfl)
+        else:
+            stepper = ADERDGMPM(grid, mats, bcs, cell_material, order=order, cfl=cfl, particles_in=particles,
+                                mls_order=method.get("mls_order", -1), backmap=method.get("backmap", "pic"))
     n = len(stepper.particles)
     init = scene.get("initial") or {}
     v0 = _array(scene, "initial.velocity", init.get("velocity", [0.0] * d), (d,), f"{d} number(s) (m/s)")

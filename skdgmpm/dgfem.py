@@ -100,9 +100,9 @@ class DGFEM(GodunovScheme):
         rho_cell = np.array([m.rho for m in self.materials.materials])[self.cell_material]
         X = np.asarray(basis.global_coordinates()).reshape(d, -1).T
         cell = np.repeat(np.arange(nel), nq)
-        self.particles = Particles(X, np.zeros_like(X), cell, basis.dx.ravel(), rho_cell[cell],
-                                   self.cell_material[cell])
-        self.rho_point = self.particles.rho0
+        self.gauss = Particles(X, np.zeros_like(X), cell, basis.dx.ravel(), rho_cell[cell],
+                               self.cell_material[cell])
+        self.particles = self.gauss            # the points that carry the state
         self.h_min = float(g.cell_sizes().min())
         self.speed_factor = 2 * self.order + 1
         self.face_options = {"pointwise": True, "intorder": q}
@@ -120,7 +120,7 @@ class DGFEM(GodunovScheme):
 
     def project(self, U_points):
         """L2 projection of point values onto the DG space (Gauss weights)."""
-        return self.apply_mass_inverse(self.B.T @ (self.particles.volume[:, None] * U_points))
+        return self.apply_mass_inverse(self.B.T @ (self.gauss.volume[:, None] * U_points))
 
     def point_state(self, U, cells, rho):
         """Q from U pointwise: P = P(F) with each cell's law, v = p / rho0."""
@@ -140,7 +140,7 @@ class DGFEM(GodunovScheme):
     # ---------------------------------------------------------------- stages
     def volume_flux(self, U_dofs):
         """sum_q w_q dPhi/dX_alpha F_alpha(Q(X_q)), the law evaluated at the Gauss points."""
-        return self.volume_flux_points(self.point_state(self.B @ U_dofs, self.particles.cell, self.rho_point))
+        return self.volume_flux_points(self.point_state(self.B @ U_dofs, self.gauss.cell, self.gauss.rho0))
 
     def volume_flux_points(self, Q):
         """The volume term from Q at the Gauss points (n_points, ncomp)."""
@@ -173,7 +173,7 @@ class DGFEM(GodunovScheme):
     def evaluate_points(self, state, dofs, dt):
         """State at the Gauss points from the dofs; positions advanced with the new velocity."""
         U = self.B @ dofs
-        Q = self.point_state(U, self.particles.cell, self.rho_point)
+        Q = self.point_state(U, self.gauss.cell, self.gauss.rho0)
         v = Q[:, self.d * self.d:]
         new = ParticleState(state.t + dt, U, Q, state.x + dt * v, state.step + 1, dofs=dofs)
         self.check(new)
@@ -182,10 +182,10 @@ class DGFEM(GodunovScheme):
     # ---------------------------------------------------------------- driver-facing
     def initial_state(self, F, v, t=0.0):
         """From F (n, d, d) and v (n, d) at the Gauss points: L2 projection onto the DG space."""
-        U = system.join(F, self.rho_point[:, None] * v)
+        U = system.join(F, self.gauss.rho0[:, None] * v)
         dofs = self.project(U)
         state = ParticleState(t, self.B @ dofs, None, self.particles.X.copy(), dofs=dofs)
-        state.Q = self.point_state(state.U, self.particles.cell, self.rho_point)
+        state.Q = self.point_state(state.U, self.gauss.cell, self.gauss.rho0)
         self.check(state)
         return state
 

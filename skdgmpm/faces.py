@@ -64,6 +64,7 @@ class FaceSet:
     cell_R: np.ndarray
     T_L: sp.csr_matrix
     T_R: sp.csr_matrix = None
+    X: np.ndarray = None          # (nf, d) reference coordinates of the rows
 
     def __len__(self):
         return len(self.facets)
@@ -75,10 +76,13 @@ class FaceSet:
 
 
 def _rows(fb, pointwise):
-    """Per-row facet index, normal, cell: one row per face, or per facet quadrature point."""
+    """Per-row facet index, normal, cell and coordinates: one row per face (its centre of
+    quadrature) or per facet quadrature point."""
     nq = fb.dx.shape[1] if pointwise else 1
     normal = fb.normals[:, :, :nq].reshape(fb.normals.shape[0], -1).T.copy()
-    return np.repeat(fb.find, nq), normal, np.repeat(fb.tind, nq)
+    X = np.asarray(fb.global_coordinates())                              # (d, nf, nqp)
+    X = X.reshape(X.shape[0], -1).T if pointwise else np.einsum("dfq,fq->fd", X, fb.dx) / fb.dx.sum(1)[:, None]
+    return np.repeat(fb.find, nq), normal, np.repeat(fb.tind, nq), X
 
 
 def interior_faces(mesh, element, pointwise=False, intorder=None):
@@ -88,8 +92,8 @@ def interior_faces(mesh, element, pointwise=False, intorder=None):
     trace = _point_trace if pointwise else _average_trace
     T_L, measure = trace(fb[0])
     T_R, _ = trace(fb[1])
-    facets, normal, cell_L = _rows(fb[0], pointwise)
-    return FaceSet(facets, normal, measure, cell_L, _rows(fb[1], pointwise)[2], T_L, T_R)
+    facets, normal, cell_L, X = _rows(fb[0], pointwise)
+    return FaceSet(facets, normal, measure, cell_L, _rows(fb[1], pointwise)[2], T_L, T_R, X)
 
 
 def boundary_faces(mesh, element, facets, n_dofs, pointwise=False, intorder=None):
@@ -97,9 +101,9 @@ def boundary_faces(mesh, element, facets, n_dofs, pointwise=False, intorder=None
     facets = np.asarray(facets, dtype=np.int64)
     if len(facets) == 0:
         return FaceSet(facets, np.zeros((0, mesh.dim())), np.zeros(0), facets, facets,
-                       sp.csr_matrix((0, n_dofs)))
+                       sp.csr_matrix((0, n_dofs)), None, np.zeros((0, mesh.dim())))
     kw = {} if intorder is None else {"intorder": intorder}
     fb = FacetBasis(mesh, element, facets=facets, **kw)
     T, measure = (_point_trace if pointwise else _average_trace)(fb)
-    facets, normal, cell = _rows(fb, pointwise)
-    return FaceSet(facets, normal, measure, cell, -np.ones_like(cell), T)
+    facets, normal, cell, X = _rows(fb, pointwise)
+    return FaceSet(facets, normal, measure, cell, -np.ones_like(cell), T, None, X)

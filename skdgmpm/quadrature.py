@@ -13,29 +13,35 @@ from skfem import CellBasis
 from skdgmpm import forms
 
 
-def particle_basis(grid, particles):
+def cell_slots(cell, n_cells):
+    """Per-cell padding of particles: (n_max, slot) with slot (n_particles,) the flat index of each
+    particle in a (n_cells, n_max) array."""
+    counts = np.bincount(cell, minlength=n_cells)
+    n_max = max(int(counts.max()), 1)
+    order = np.argsort(cell, kind="stable")
+    start = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    local = np.empty(len(cell), dtype=np.int64)
+    local[order] = np.arange(len(cell)) - np.repeat(start, counts)
+    return n_max, cell * n_max + local
+
+
+def particle_basis(grid, particles, element=None):
     """CellBasis on the active sub-mesh whose quadrature points are the particles.
 
     Cells hold different numbers of particles: they are padded to the largest count with points at
     the cell centre and zero weight. Returns the basis and ``slot`` (n_particles,), the flat index
-    of each particle in the (cell, point) quadrature array.
+    of each particle in the (cell, point) quadrature array. ``element`` defaults to the grid's.
     """
     nel = grid.submesh.nelements
-    counts = np.bincount(particles.cell, minlength=nel)
-    nq = max(int(counts.max()), 1)
-    order = np.argsort(particles.cell, kind="stable")
-    start = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    local = np.empty(len(particles), dtype=np.int64)
-    local[order] = np.arange(len(particles)) - np.repeat(start, counts)
-    slot = particles.cell * nq + local
+    nq, slot = cell_slots(particles.cell, nel)
 
     d = grid.dim
     Xe = np.full((d, nel * nq), 0.5)
     Xe[:, slot] = particles.xi.T
     W = np.zeros(nel * nq)
     W[slot] = particles.volume
-    basis = CellBasis(grid.submesh, grid.element, quadrature=(Xe.reshape(d, nel, nq), np.ones((nel, nq))),
-                      elements=np.arange(nel))
+    basis = CellBasis(grid.submesh, element or grid.element,
+                      quadrature=(Xe.reshape(d, nel, nq), np.ones((nel, nq))), elements=np.arange(nel))
     basis.dx = W.reshape(nel, nq)          # volumes as weights, replacing w_q |det J|
     return basis, slot
 

@@ -29,11 +29,12 @@ SCHEMA = {
     "initial": {"velocity": list, "F": list, "exact": bool},
     "boundaries": None,
     "bc": None,
-    "method": {"name": str, "integrator": str, "transverse": str, "cfl": NUMBER, "order": int},
+    "method": {"name": str, "integrator": str, "transverse": str, "cfl": NUMBER, "order": int,
+               "mls_order": int, "backmap": str, "limiter": str},
     "run": {"t_end": NUMBER, "frames": int},
     "exact": None,
 }
-METHODS = ("dgmpm", "rk-dgfem", "ader-dgfem")
+METHODS = ("dgmpm", "rk-dgfem", "ader-dgfem", "ader-dgmpm")
 
 
 def _where(source, key):

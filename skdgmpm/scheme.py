@@ -89,6 +89,10 @@ class GodunovScheme:
         """(Q, F, rho0) on one side of a face set: ((nf, ncomp), (nf, d, d), (nf,))."""
         raise NotImplementedError
 
+    def face_operator(self, faces, side):
+        """Operator from the state's unknowns to the face rows (the DG trace by default)."""
+        return faces.T_L if side == "L" else faces.T_R
+
     def _side(self, faces, T, grid_state, cells):
         Qf, Ff, rho = self.face_values(T, grid_state, cells)
         P, v = system.split(Qf, self.d)
@@ -99,7 +103,7 @@ class GodunovScheme:
     def boundary_flux(self, grid_state, time):
         """(d) ghost states -> boundary stationary states and fluxes; returns states and power."""
         b = self.boundary
-        t_L, v_L, C, rho, Q_L = self._side(b, b.T_L, grid_state, b.cell_L)
+        t_L, v_L, C, rho, Q_L = self._side(b, self.face_operator(b, "L"), grid_state, b.cell_L)
         Z = impedance(C, b.normal, rho)
         t_s, v_s = t_L.copy(), v_L.copy()
         for k, (_, bc) in [(-1, (None, None))] + list(enumerate(self.bcs)):
@@ -116,8 +120,8 @@ class GodunovScheme:
     def interface_flux(self, grid_state):
         """(e) Godunov fluxes at interior faces from the linearised Riemann solver."""
         f = self.interior
-        t_L, v_L, C_L, rho_L, _ = self._side(f, f.T_L, grid_state, f.cell_L)
-        t_R, v_R, C_R, rho_R, _ = self._side(f, f.T_R, grid_state, f.cell_R)
+        t_L, v_L, C_L, rho_L, _ = self._side(f, self.face_operator(f, "L"), grid_state, f.cell_L)
+        t_R, v_R, C_R, rho_R, _ = self._side(f, self.face_operator(f, "R"), grid_state, f.cell_R)
         Z_L, Z_R = impedance(C_L, f.normal, rho_L), impedance(C_R, f.normal, rho_R)
         t_s, v_s = godunov_state(t_L, v_L, t_R, v_R, Z_L, Z_R)
         flux = system.normal_flux(t_s, v_s, f.normal)

@@ -10,7 +10,7 @@ from .errors import InputError
 from .run import run
 from .scene import load_scene
 
-DEFAULT_INTEGRATOR = {"dgmpm": "euler", "rk-dgfem": "rk4", "ader-dgfem": "ader"}
+DEFAULT_INTEGRATOR = {"dgmpm": "euler", "rk-dgfem": "rk4", "ader-dgfem": "ader", "ader-dgmpm": "ader"}
 
 
 @dataclass(frozen=True)

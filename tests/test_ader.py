@@ -62,3 +62,19 @@ def test_picard_is_exact_after_the_nilpotency_index_for_a_linear_problem(scene, 
     err = lambda u: np.max(np.abs(u - exact) / scale)
     assert err(predict(index(order))) < 1e-12
     assert err(predict(index(order) - 1)) > 1e-9
+
+
+LAYOUT = {1: "[0.25, 0.75]", 2: "[0.25, 0.5, 0.75]", 3: "[0.2, 0.4, 0.6, 0.8]"}     # L23 §5.1
+
+
+@pytest.mark.parametrize("order", [1, 2, 3])
+def test_ader_dgmpm_standing_wave_rates_are_p_plus_1(order, record_property):
+    """ADER-DGMPM with (P+1)^2 particles per cell at the L23 §5.1 parent coordinates, MLS of
+    order P: L2 rates at the particles >= P + 1 - 0.2 against the exact eigenmode."""
+    errors = {n: run("standing_wave_2d", ['method.name="ader-dgmpm"', f"method.order={order}",
+                                          f"grid.cells=[{n},{n}]", "method.cfl=0.5",
+                                          f"particles.per_cell={LAYOUT[order]}"], progress=False).errors
+              for n in (4, 8)}
+    rates = {k: np.log2(errors[4][k]["L2_rel"] / errors[8][k]["L2_rel"]) for k in ("eps11", "P11", "v1")}
+    record_property("rates", rates)
+    assert all(r >= order + 1 - 0.2 for r in rates.values()), rates

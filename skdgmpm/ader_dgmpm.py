@@ -1,0 +1,192 @@
+"""ADER-DGMPM [L23 §4]: the ADER-DGFEM corrector on the grid, the predictor on the particles.
+
+Forward map: the particles of each cell define MLS shape functions chi_p (skdgmpm.mls); the
+predictor's space-time dofs are the particle values at the P+1 time nodes (L23 eq 45-46) and its
+matrices come from Gauss quadrature of the MLS functions (eq 59-61):
+
+    u_hat[s] = U^n - dt sum_s' T[s, s'] sum_alpha D_alpha F_alpha(q_hat[s']),
+    D_alpha = M_chi^-1 G_alpha,  M_chi = int chi_k chi_l,  G_alpha = int chi_k dchi_l/dX_alpha,
+
+with the law evaluated at the particles at every Picard iteration and the Taylor guess of eq 64
+(collocated MLS gradients). The grid solution at t_n is the L2 projection of the MLS
+reconstruction onto the DG space (exact for polynomials the MLS basis reproduces). The corrector
+evaluates the predictor with chi at the Gauss and facet points. Back-mapping: PIC (eq 65) or FLIP
+(eq 66); then the law at the particles.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from . import system
+from .ader import ADERDGFEM
+from .errors import InputError
+from .mls import shape_functions
+from .quadrature import cell_slots, interpolation_matrix, particle_basis
+from .scheme import GridState, ParticleState, cell_values
+
+BACKMAPS = ("pic", "flip")
+
+
+@dataclass
+class ADERDGMPM(ADERDGFEM):
+    """ADER-DGMPM of order P with ``particles``; ``mls_order`` defaults to P."""
+
+    particles_in: object = None
+    mls_order: int = -1
+    backmap: str = "pic"
+
+    def __post_init__(self):
+        if self.backmap not in BACKMAPS:
+            raise InputError(f"method.backmap = {self.backmap!r}: expected one of {', '.join(BACKMAPS)}")
+        super().__post_init__()
+        p = self.particles = self.particles_in
+        if self.mls_order < 0:
+            self.mls_order = self.order
+        nel, nq = self.basis.dx.shape
+        d = self.d
+        self.n_max, self.slot = cell_slots(p.cell, nel)
+        xi = np.full((nel * self.n_max, d), 0.5)
+        xi[self.slot] = p.xi
+        self.mask = np.zeros(nel * self.n_max)
+        self.mask[self.slot] = 1.0
+        xi, mask = xi.reshape(nel, self.n_max, d), self.mask.reshape(nel, self.n_max)
+        cells = np.arange(nel)
+        mapping = self.basis.mapping
+
+        def mls(points, tind):
+            """chi and physical gradients at parent ``points`` (nel, n, d) of each cell."""
+            phi, dphi = shape_functions(xi, mask, points, self.mls_order, cells=cells)
+            inv = mapping.invDF(np.moveaxis(points, -1, 0), tind=tind)          # (d, d, nel, n)
+            return phi, np.einsum("cepm,mace->cepa", dphi, inv)
+
+        # Gauss points: projection of the reconstruction and predictor matrices (eq 59-61)
+        gauss = np.broadcast_to(self.basis.X.T[None], (nel, nq, d)).copy()
+        self.chi_gauss, dchi_gauss = mls(gauss, cells)
+        w = self.basis.dx
+        M = np.einsum("cg,cgk,cgl->ckl", w, self.chi_gauss, self.chi_gauss)
+        M += np.einsum("ck,kl->ckl", 1.0 - mask, np.eye(self.n_max))          # padding rows
+        G = np.einsum("cg,cgk,cgla->ackl", w, self.chi_gauss, dchi_gauss)
+        self.D_particles = np.linalg.solve(M[None], G)                          # (d, nel, nm, nm)
+        _, self.grad_at_particles = mls(xi, cells)                              # Taylor guess
+        self.grad_at_particles = np.moveaxis(self.grad_at_particles, -1, 0)     # (d, nel, nm, nm)
+        self.E_gauss = self._sparse(self.chi_gauss, np.arange(nel * nq).reshape(nel, nq))
+        # facet points: each side evaluates its own cell's MLS reconstruction
+        self._face_ops = {}
+        for faces in (self.interior, self.boundary):
+            for side, cell in (("L", faces.cell_L), ("R", faces.cell_R)):
+                if side == "R" and faces.T_R is None:
+                    continue
+                self._face_ops[id(faces), side] = self._facet_operator(faces.X, cell, mls, nel)
+        basis_p, slot_p = particle_basis(self.grid, p, self.basis.elem)
+        self.S = interpolation_matrix(basis_p, slot_p)                          # DG basis at particles
+        self.cell_material = cell_values("materials", p.cell, p.material, nel)
+
+    def _sparse(self, values, rows):
+        """(n_rows, n_particles) from per-cell values (nel, n, n_max) on padded slots."""
+        nel, n, nm = values.shape
+        col_of_slot = -np.ones(nel * nm, dtype=np.int64)
+        col_of_slot[self.slot] = np.arange(len(self.slot))
+        cols = col_of_slot.reshape(nel, 1, nm).repeat(n, axis=1)
+        r = np.broadcast_to(rows[:, :, None], values.shape)
+        keep = cols >= 0
+        return sp.csr_matrix((values[keep], (r[keep], cols[keep])),
+                             shape=(int(rows.max()) + 1 if rows.size else 0, len(self.slot)))
+
+    def _facet_operator(self, X, cell, mls, nel):
+        """MLS evaluation at facet rows: parent coordinates of each row in its cell."""
+        n = len(X)
+        if n == 0:
+            return sp.csr_matrix((0, len(self.slot)))
+        ref = self.basis.mapping.invF(X.T[:, :, None], tind=cell)[:, :, 0].T    # (n, d)
+        counts = np.bincount(cell, minlength=nel)
+        width = max(int(counts.max()), 1)
+        _, row_slot = cell_slots(cell, nel)
+        pts = np.full((nel * width, self.d), 0.5)
+        pts[row_slot] = ref
+        rows = -np.ones(nel * width, dtype=np.int64)
+        rows[row_slot] = np.arange(n)
+        phi, _ = mls(pts.reshape(nel, width, self.d), np.arange(nel))
+        rows = rows.reshape(nel, width)
+        phi = np.where((rows >= 0)[:, :, None], phi, 0.0)
+        op = self._sparse(phi, np.maximum(rows, 0))
+        op.resize((n, len(self.slot)))
+        return op.tocsr()
+
+    def face_operator(self, faces, side):
+        return self._face_ops[id(faces), side]
+
+    def face_values(self, T, grid_state, cells):
+        d = self.d
+        U, Q = T @ grid_state.U, T @ grid_state.Q
+        return Q, U[:, : d * d].reshape(-1, d, d), self.rho_cell[cells]
+
+    # ---------------------------------------------------------------- predictor at particles
+    def _padded(self, values):
+        out = np.zeros((len(self.mask),) + values.shape[1:])
+        out[self.slot] = values
+        return out.reshape((self.basis.dx.shape[0], self.n_max) + values.shape[1:])
+
+    def predictor(self, U_particles, dt):
+        """Space-time predictor with dofs at the particles: (u_hat, q_hat) (P+1, n_particles, nc)."""
+        nel = self.basis.dx.shape[0]
+        U = self._padded(U_particles)
+        law = self._law_particles
+        u_hat = np.broadcast_to(U[None], (len(self.tau),) + U.shape)
+        if self.picard_guess == "taylor":                                   # L23 eq 64
+            div0 = self._divergence(self._padded(law(U_particles)), self.grad_at_particles)
+            u_hat = u_hat - dt * self.tau[:, None, None, None] * div0[None]
+        d = self.d
+        scale = np.ones(U.shape[-1])
+        scale[: d * d] = np.abs(U_particles[:, : d * d]).max() or 1.0
+        scale[d * d:] = np.abs(U_particles[:, d * d:]).max() or 1.0
+        for it in range(1, self.picard_max + 1):
+            q_hat = np.stack([self._padded(law(u.reshape(nel * self.n_max, -1)[self.slot])) for u in u_hat])
+            new = U[None] - dt * np.einsum("st,tenc->senc", self.T_tau, self._divergence(q_hat, self.D_particles))
+            change = np.max(np.abs(new - u_hat) / scale)
+            u_hat = new
+            if change <= self.picard_tol:
+                break
+        self.picard.add(it, change <= self.picard_tol)
+        flat = u_hat.reshape(len(self.tau), nel * self.n_max, -1)[:, self.slot]
+        return flat, np.stack([law(u) for u in flat])
+
+    def _law_particles(self, U):
+        return self.point_state(U, self.particles.cell, self.particles.rho0)
+
+    # ---------------------------------------------------------------- corrector and back-map
+    def corrector(self, dofs, u_hat, q_hat, time, dt):
+        R_total = np.zeros_like(dofs)
+        work = 0.0
+        for s, (tau, w) in enumerate(zip(self.tau, self.w_tau)):
+            R, power = self.surface_residual(GridState(u_hat[s], q_hat[s]), time + tau * dt, dt)
+            R_total += w * (R + self.volume_flux_points(self.E_gauss @ q_hat[s]))
+            work += w * dt * power
+        return dofs + dt * self.apply_mass_inverse(R_total), work
+
+    def step(self, state, dt_max=np.inf):
+        dofs_n = self.project(self.E_gauss @ state.U)                 # grid image of the MLS field
+
+        def attempt(dt):
+            u_hat, q_hat = self.predictor(state.U, dt)
+            dofs, work = self.corrector(dofs_n, u_hat, q_hat, state.t, dt)
+            if self.backmap == "pic":
+                U = self.S @ dofs
+            else:
+                U = state.U + self.S @ (dofs - dofs_n)
+            d = self.d
+            F, p = system.split(U, d)
+            v = p / self.particles.rho0[:, None]
+            P = self.materials.stress(F, self.particles.material)
+            new = ParticleState(state.t + dt, U, system.join(P, v), state.x + dt * v, state.step + 1)
+            self.check(new)
+            return new, work
+
+        return self.step_with_cfl_guard(state, dt_max, attempt)
+
+    def initial_state(self, F, v, t=0.0):
+        P = self.materials.stress(F, self.particles.material)
+        U = system.join(F, self.particles.rho0[:, None] * v)
+        state = ParticleState(t, U, system.join(P, v), self.particles.X.copy())
+        self.check(state)
+        return state
