@@ -81,8 +81,7 @@ class ADERDGFEM(DGFEM):
         super().__post_init__()
         self.integrator = requested
         nel, nq = self.basis.dx.shape
-        B = np.transpose(self._phi, (1, 2, 0))                          # (nel, nq, nb)
-        self.B_inv = np.linalg.inv(B)                                   # points -> coefficients
+        self.B_inv = self.point_to_dofs
         grad = np.transpose(self._grad, (1, 2, 3, 0))                   # (d, nel, nq, nb)
         self.D_points = np.einsum("aeqb,ebr->aeqr", grad, self.B_inv)   # d/dX_alpha at the points
         self.tau, self.w_tau, self.T_tau = time_matrices(self.order)
@@ -150,7 +149,7 @@ class ADERDGFEM(DGFEM):
             R, power = self.surface_residual(grid_state, time + tau * dt, dt)
             R_total += w * (R + self.volume_flux_points(Q_points))
             work += w * dt * power
-        return dofs + dt * self.apply_mass_inverse(R_total), work
+        return self.limit(dofs + dt * self.apply_mass_inverse(R_total)), work
 
     def advance(self, U, time, dt):
         u_hat, q_hat = self.predictor(self.B @ U, dt)

@@ -162,7 +162,7 @@ class ADERDGMPM(ADERDGFEM):
             R, power = self.surface_residual(GridState(u_hat[s], q_hat[s]), time + tau * dt, dt)
             R_total += w * (R + self.volume_flux_points(self.E_gauss @ q_hat[s]))
             work += w * dt * power
-        return dofs + dt * self.apply_mass_inverse(R_total), work
+        return self.limit(dofs + dt * self.apply_mass_inverse(R_total)), work
 
     def step(self, state, dt_max=np.inf):
         dofs_n = self.project(self.E_gauss @ state.U)                 # grid image of the MLS field

@@ -160,12 +160,14 @@ def build(scene):
         cell_material = cell_values("materials", particles.cell, particles.material, grid.submesh.nelements)
         if name == "rk-dgfem":
             stepper = DGFEM(grid, mats, bcs, cell_material, order=order, cfl=cfl,
-                            integrator=method.get("integrator", "rk2"))
+                            integrator=method.get("integrator", "rk2"), limiter=method.get("limiter", "none"))
         elif name == "ader-dgfem":
-            stepper = ADERDGFEM(grid, mats, bcs, cell_material, order=order, cfl=cfl)
+            stepper = ADERDGFEM(grid, mats, bcs, cell_material, order=order, cfl=cfl,
+                                limiter=method.get("limiter", "none"))
         else:
             stepper = ADERDGMPM(grid, mats, bcs, cell_material, order=order, cfl=cfl, particles_in=particles,
-                                mls_order=method.get("mls_order", -1), backmap=method.get("backmap", "pic"))
+                                mls_order=method.get("mls_order", -1), backmap=method.get("backmap", "pic"),
+                                limiter=method.get("limiter", "none"))
     n = len(stepper.particles)
     init = scene.get("initial") or {}
     v0 = _array(scene, "initial.velocity", init.get("velocity", [0.0] * d), (d,), f"{d} number(s) (m/s)")

@@ -21,6 +21,7 @@ from . import forms, system
 from .elements import ElementLineLagrange
 from .errors import InputError
 from .faces import interior_faces
+from .limiter import SlopeLimiter
 from .particles import Particles
 from .scheme import GodunovScheme, GridState, ParticleState
 
@@ -67,6 +68,8 @@ class DGFEM(GodunovScheme):
                      "evaluate_points")
     external_work: float = field(default=0.0, init=False)
     transverse: str = "none"
+    limiter: str = "none"
+    limited_cells: int = field(default=0, init=False)
 
     def __post_init__(self):
         if self.integrator not in INTEGRATORS:
@@ -109,6 +112,9 @@ class DGFEM(GodunovScheme):
         self.interior = interior_faces(g.submesh, element, pointwise=True, intorder=q)
         self.rho_cell = rho_cell
         self._setup_boundary(element)
+        # (P+1)^d Gauss points = (P+1)^d dofs: point values <-> coefficients, cell by cell
+        self.point_to_dofs = np.linalg.inv(np.transpose(phi, (1, 2, 0)))                # (nel, nb, nq)
+        self.slope_limiter = SlopeLimiter(self, self.limiter)
 
     # ---------------------------------------------------------------- operators
     def apply_mass_inverse(self, R):
@@ -158,17 +164,23 @@ class DGFEM(GodunovScheme):
         R, power = self.surface_residual(GridState(U_dofs, None), time, dt)
         return self.apply_mass_inverse(R + self.volume_flux(U_dofs)), power
 
+    def limit(self, dofs):
+        """The slope limiter (L23 §3.3), when the scene switches it on."""
+        out, n = self.slope_limiter(dofs)
+        self.limited_cells += n
+        return out
+
     def advance(self, U, time, dt):
-        """TVD-RK2 (Heun) or classical RK4; returns new dofs and the boundary work."""
+        """TVD-RK2 (Heun) or classical RK4, limiting every stage; returns dofs and boundary work."""
         k1, p1 = self.rate(U, time, dt)
         if self.integrator == "rk2":
-            U1 = U + dt * k1
+            U1 = self.limit(U + dt * k1)
             k2, p2 = self.rate(U1, time + dt, dt)
-            return 0.5 * (U + U1 + dt * k2), 0.5 * dt * (p1 + p2)
-        k2, p2 = self.rate(U + 0.5 * dt * k1, time + 0.5 * dt, dt)
-        k3, p3 = self.rate(U + 0.5 * dt * k2, time + 0.5 * dt, dt)
-        k4, p4 = self.rate(U + dt * k3, time + dt, dt)
-        return U + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4), dt / 6 * (p1 + 2 * p2 + 2 * p3 + p4)
+            return self.limit(0.5 * (U + U1 + dt * k2)), 0.5 * dt * (p1 + p2)
+        k2, p2 = self.rate(self.limit(U + 0.5 * dt * k1), time + 0.5 * dt, dt)
+        k3, p3 = self.rate(self.limit(U + 0.5 * dt * k2), time + 0.5 * dt, dt)
+        k4, p4 = self.rate(self.limit(U + dt * k3), time + dt, dt)
+        return self.limit(U + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)), dt / 6 * (p1 + 2 * p2 + 2 * p3 + p4)
 
     def evaluate_points(self, state, dofs, dt):
         """State at the Gauss points from the dofs; positions advanced with the new velocity."""
