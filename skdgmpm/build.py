@@ -11,6 +11,7 @@ from .ader import ADERDGFEM
 from .ader_dgmpm import ADERDGMPM
 from .dgfem import DGFEM, INTEGRATORS
 from .dgmpm import DGMPM
+from .exact import INITIAL
 from .scene import exact_solution
 from .scheme import cell_values
 from .errors import InputError, InstabilityError
@@ -173,11 +174,22 @@ def build(scene):
     v0 = _array(scene, "initial.velocity", init.get("velocity", [0.0] * d), (d,), f"{d} number(s) (m/s)")
     F0 = _array(scene, "initial.F", init.get("F", np.eye(d).tolist()), (d, d), f"{d}x{d} numbers")
     F0, v0 = np.broadcast_to(F0, (n, d, d)).copy(), np.broadcast_to(v0, (n, d)).copy()
+    source = None
     if init.get("exact"):
-        solution = exact_solution(scene)
-        if solution is None:
+        source = exact_solution(scene)
+        if source is None:
             raise InputError(f"{scene.where('initial.exact')} = true needs an [exact] table")
-        fields = solution.fields(stepper.particles.X, 0.0)
+    elif "field" in init:
+        spec = dict(init["field"])
+        name = spec.pop("name", None)
+        if name not in INITIAL:
+            raise InputError(f"{scene.where('initial.field.name')} = {name!r}: expected one of {', '.join(INITIAL)}")
+        try:
+            source = INITIAL[name](**spec)
+        except TypeError as exc:
+            raise InputError(f"{scene.where('initial.field')}: {exc}") from None
+    if source is not None:
+        fields = source.fields(stepper.particles.X, 0.0)
         for i in range(d):
             v0[:, i] = fields[f"v{i + 1}"]
             for a in range(d):

@@ -60,7 +60,7 @@ def _cmd_converge(args):
     rows = study.convergence(args.scene, [m for m in args.methods.split(",") if m],
                              study._int_list(args.orders, "--orders"), study._int_list(args.cells, "--cells"),
                              overrides=args.set, fields=[f for f in (args.fields or "").split(",") if f] or None,
-                             progress=not args.quiet)
+                             progress=not args.quiet, reference=args.reference)
     print(study.format_table(rows))
     out.mkdir(parents=True, exist_ok=True)
     study.write_csv(out / "convergence.csv", rows)
@@ -89,6 +89,9 @@ def main(argv=None):
     p.add_argument("--orders", default="1,2,3", help="orders P of the high-order methods")
     p.add_argument("--cells", default="4,8,16", help="cells per direction")
     p.add_argument("--fields", default=None, help="fields to report (default: all of the exact solution)")
+    p.add_argument("--reference", default=None, metavar="METHOD:P:CELLS",
+                   help="fine DGFEM run to compare with when the scene has no exact solution, "
+                        "e.g. rk-dgfem/rk4:3:40")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene key")
     p.add_argument("--out", default=None, help="output directory (default runs/converge_SCENE)")
     p.add_argument("--force", action="store_true", help="replace an existing output directory")

@@ -312,6 +312,26 @@ class StandingWave2D:
         }
 
 
+@dataclass(frozen=True, kw_only=True)
+class SquareInitialStrain:
+    """Initial state of the L23 §5.1 convergence square (no exact solution: compare with a fine
+    reference): eps = f (e1 (x) e1 - e2 (x) e2), f = U0 pi / 2 cos(pi X / 2) sin(pi Y / 2)
+    (L23 eq 68-69), v = 0. Only t = 0 is defined."""
+
+    amplitude: float = 5e-4
+
+    def fields(self, X, t):
+        if t != 0:
+            raise InputError("SquareInitialStrain: only the initial state (t = 0) is known")
+        X = np.asarray(X, dtype=float)
+        f = self.amplitude * math.pi / 2 * np.cos(math.pi * X[:, 0] / 2) * np.sin(math.pi * X[:, 1] / 2)
+        zero = np.zeros(len(X))
+        return {"F11": 1 + f, "F12": zero, "F21": zero, "F22": 1 - f, "v1": zero, "v2": zero}
+
+
+INITIAL = {"square_initial_strain": SquareInitialStrain}
+
+
 EXACT = {"elastic_bar_step": ElasticBarStep, "svk_bar_riemann": SVKBarRiemann,
          "standing_wave_2d": StandingWave2D}
 

@@ -26,7 +26,7 @@ SCHEMA = {
     "particles": {"per_cell": (int, list), "file": str},
     "material": {"law": str, "E": NUMBER, "nu": NUMBER, "rho": NUMBER},
     "regions": list,
-    "initial": {"velocity": list, "F": list, "exact": bool},
+    "initial": {"velocity": list, "F": list, "exact": bool, "field": dict},
     "boundaries": None,
     "bc": None,
     "method": {"name": str, "integrator": str, "transverse": str, "cfl": NUMBER, "order": int,

@@ -42,16 +42,23 @@ def _int_list(text, option):
     return values
 
 
-def convergence(scene_name, methods, orders, cells, overrides=(), fields=None, progress=True):
+def convergence(scene_name, methods, orders, cells, overrides=(), fields=None, progress=True,
+                reference=None):
     """Run every (method, order, grid) and return one row per run.
 
     Rows: method, order, cells, h, dofs, steps, wall_s, and ``L2_<field>`` (relative L2 error at
     the method's points: particles for DGMPM, Gauss points for DGFEM) plus ``rate_<field>``
-    (observed order against the previous grid of the same method and order).
+    (observed order against the previous grid of the same method and order). Errors are taken
+    against the scene's exact solution, or against ``reference`` = "method/integrator:P:cells"
+    (a fine DGFEM run) for scenes without one.
     """
     base = load_scene(scene_name, overrides)
-    if base.get("exact") is None:
-        raise InputError(f"{base.where('exact')}: a convergence study needs a scene with an exact solution")
+    ref = None
+    if reference is not None:
+        ref = _reference_run(base, reference, progress)
+    elif base.get("exact") is None:
+        raise InputError(f"{base.where('exact')}: a convergence study needs a scene with an exact "
+                         f"solution, or --reference METHOD:P:CELLS")
     if "mesh" in base.data["grid"]:
         raise InputError(f"{base.where('grid.mesh')}: convergence studies refine generated grids only")
     scene_method = base.data["method"]
@@ -77,16 +84,33 @@ def convergence(scene_name, methods, orders, cells, overrides=(), fields=None, p
         summary = result.summary()
         row = {"method": v.label, "order": p, "cells": n, "h": float(size[0]) / n,
                "dofs": summary["dofs"], "steps": summary["steps"], "wall_s": summary["wall_s"]}
-        for name in fields or result.errors:
-            if name not in result.errors:
+        errors = result.errors if ref is None else reference_errors(result, ref, fields or ("eps11", "P11", "v1"))
+        for name in fields or errors:
+            if name not in errors:
                 raise InputError(f"--fields: {name!r} is not a field of the exact solution "
-                                 f"(known: {', '.join(result.errors)})")
-            row[f"L2_{name}"] = result.errors[name]["L2_rel"]
+                                 f"(known: {', '.join(errors)})")
+            row[f"L2_{name}"] = errors[name]["L2_rel"]
         rows.append(row)
         bar.update()
     bar.close()
     _rates(rows)
     return rows
+
+
+def _reference_run(base, text, progress):
+    try:
+        label, order, cells = text.split(":")
+        v = Variant.parse(label)
+        order, cells = int(order), int(cells)
+    except ValueError:
+        raise InputError(f"--reference {text!r}: expected METHOD[/INTEGRATOR]:P:CELLS, "
+                         f"e.g. rk-dgfem/rk4:3:40") from None
+    grid = f"grid.cells=[{cells}, {cells}]" if base.dim == 2 else f"grid.cells={cells}"
+    result = run(base, [f'method.name="{v.name}"', f'method.integrator="{v.integrator or DEFAULT_INTEGRATOR[v.name]}"',
+                        f"method.order={order}", grid], progress=progress)
+    if result.status != "ok":
+        raise InputError(f"--reference run stopped: {result.message}")
+    return GridReference(result)
 
 
 def _rates(rows):
@@ -159,3 +183,44 @@ def _bar(total, enabled):
         return _Quiet()
     from tqdm.auto import tqdm
     return tqdm(total=total, unit="run", file=sys.stderr, leave=False)
+
+
+class GridReference:
+    """A finished DG run (RK-/ADER-DGFEM) as a reference solution: its fields at any points of
+    the body at its final time, by evaluating the DG solution (for studies without an exact
+    solution, e.g. L23 §5.1 against a fine grid)."""
+
+    def __init__(self, result):
+        st = result.stepper
+        if getattr(result.state, "dofs", None) is None:
+            raise InputError("--reference must be a DGFEM method (rk-dgfem or ader-dgfem)")
+        self.stepper, self.dofs, self.t = st, result.state.dofs, result.state.t
+
+    def fields(self, X, t):
+        from . import output, system
+        from .particles import Particles, locate
+        from .quadrature import interpolation_matrix, particle_basis
+        from .scheme import ParticleState
+
+        if not np.isclose(t, self.t, rtol=1e-9, atol=0.0):
+            raise InputError(f"reference at t = {self.t:.6g} s, asked at t = {t:.6g} s")
+        st = self.stepper
+        cell, xi = locate(st.grid.submesh, X, source="reference")
+        rho = st.rho_cell[cell]
+        points = Particles(np.asarray(X), xi, cell, np.ones(len(X)), rho, st.cell_material[cell])
+        basis, slot = particle_basis(st.grid, points, st.basis.elem)
+        U = interpolation_matrix(basis, slot) @ self.dofs
+        Q = st.point_state(U, cell, rho)
+
+        class _View:                           # what output.particle_fields reads
+            d, materials, particles = st.d, st.materials, points
+
+        return output.particle_fields(_View, ParticleState(t, U, Q, np.asarray(X)))
+
+
+def reference_errors(result, reference, fields):
+    from .exact import error_norms
+
+    values = result.fields()
+    ref = reference.fields(result.X, result.state.t)
+    return {k: error_norms(values[k], ref[k], result.disc.particles.volume) for k in fields}
