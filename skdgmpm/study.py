@@ -10,6 +10,9 @@ from .errors import InputError
 from .run import run
 from .scene import load_scene
 
+# particles per cell of ADER-DGMPM at order P: (P+1)^d at the parent coordinates of L23 §5.1
+L23_LAYOUT = {1: "[0.25, 0.75]", 2: "[0.25, 0.5, 0.75]", 3: "[0.2, 0.4, 0.6, 0.8]"}
+
 DEFAULT_INTEGRATOR = {"dgmpm": "euler", "rk-dgfem": "rk4", "ader-dgfem": "ader", "ader-dgmpm": "ader"}
 
 
@@ -50,7 +53,8 @@ def convergence(scene_name, methods, orders, cells, overrides=(), fields=None, p
     the method's points: particles for DGMPM, Gauss points for DGFEM) plus ``rate_<field>``
     (observed order against the previous grid of the same method and order). Errors are taken
     against the scene's exact solution, or against ``reference`` = "method/integrator:P:cells"
-    (a fine DGFEM run) for scenes without one.
+    (a fine DGFEM run) for scenes without one. ADER-DGMPM runs use (P+1)^d particles per cell at
+    the L23 §5.1 parent coordinates.
     """
     base = load_scene(scene_name, overrides)
     ref = None
@@ -77,8 +81,9 @@ def convergence(scene_name, methods, orders, cells, overrides=(), fields=None, p
     for v, p, n in runs:
         bar.set_description(f"{v.label} P{p} {n} cells")
         grid = f"grid.cells=[{n}, {n}]" if base.dim == 2 else f"grid.cells={n}"
+        layout = [f"particles.per_cell={L23_LAYOUT[p]}"] if v.name == "ader-dgmpm" and p in L23_LAYOUT else []
         result = run(base, [f'method.name="{v.name}"', f'method.integrator="{v.integrator}"',
-                            f"method.order={p}", grid], progress=False)
+                            f"method.order={p}", grid, *layout], progress=False)
         if result.status != "ok":
             raise InputError(f"{v.label} P{p} with {n} cells stopped: {result.message}")
         summary = result.summary()
