@@ -111,8 +111,9 @@ def compute_errors(disc, state, solution):
             for k in exact if k in fields}
 
 
-def run(scene, overrides=(), out=None, force=False, progress=True, frames=None):
+def run(scene, overrides=(), out=None, force=False, progress=True, frames=None, max_steps=None):
     """Run ``scene`` (a `Scene`, a name or a path). Writes outputs to ``out`` if given.
+    ``max_steps`` stops the run early (benchmarks).
 
     Output is written to ``<out>.partial`` and renamed at the end, so a failed start leaves
     nothing behind; an existing non-empty ``out`` is an error unless ``force``.
@@ -144,14 +145,14 @@ def run(scene, overrides=(), out=None, force=False, progress=True, frames=None):
         shutil.rmtree(partial, ignore_errors=True)
         partial.mkdir(parents=True)
     try:
-        return _run(scene, disc, solution, stepper, state, t_end, n_frames, out, partial, progress)
+        return _run(scene, disc, solution, stepper, state, t_end, n_frames, out, partial, progress, max_steps)
     except BaseException:                 # crash or Ctrl-C: leave no half-written output behind
         if partial is not None:
             shutil.rmtree(partial, ignore_errors=True)
         raise
 
 
-def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, partial, progress):
+def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, partial, progress, max_steps=None):
     if partial is not None:
         output.write_grid(partial / "grid.vtu", disc.grid)
 
@@ -179,7 +180,7 @@ def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, partial, p
     bar = _progress(t_end, scene.name, progress)
     start = time.perf_counter()
     try:
-        while state.t < t_end * (1 - 1e-12):
+        while state.t < t_end * (1 - 1e-12) and (max_steps is None or state.step < max_steps):
             new = stepper.step(state, t_end - state.t)
             bar.update(new.t - state.t)
             state = new
