@@ -65,6 +65,8 @@ def shape_functions(xi, mask, points, order, kind=None, support=1.0, cells=None)
     kind = kind or ("cubic" if order <= 2 else "quartic")
     nc, nm, d = xi.shape
     e = exponents(order, d)
+    if np.all(mask.sum(axis=1) == len(e)) and nm == len(e) and order > 0:
+        return _interpolation(xi, points, e, order, cells)
     # centre the basis on the evaluation point for conditioning: p(x_p - x)
     rel = xi[:, None, :, :] - points[:, :, None, :]                          # (nc, ne, nm, d)
     w1, dw1 = weight(rel / support, kind)
@@ -97,3 +99,20 @@ def shape_functions(xi, mask, points, order, kind=None, support=1.0, cells=None)
             - w[..., None] * np.einsum("cei,cepik->cepk", Ainv_p0, dP)
             - w[..., None] * np.einsum("ceki,cepi->cepk", Ainv_g, P))
     return phi, dphi
+
+
+def _interpolation(xi, points, e, order, cells):
+    """MLS with exactly as many particles as monomials: the weights cancel (A^-1 B = P^-1) and
+    chi_p are the Lagrange polynomials through the particles. Solved directly on the Vandermonde
+    matrix (centred on the cell) instead of the normal equations, which square its condition."""
+    P, _ = _monomials(xi - 0.5, e)                                          # (nc, nm, nb)
+    cond = np.linalg.cond(P)
+    bad = ~np.isfinite(cond) | (cond > 1e10)
+    if bad.any():
+        c = int(np.flatnonzero(bad)[0])
+        cell = c if cells is None else cells[c]
+        raise InputError(f"MLS order {order}: singular moment matrix in cell {cell} "
+                         f"({xi.shape[1]} particles in a degenerate layout)")
+    inv = np.linalg.inv(P)                                                  # (nc, nb, nm)
+    p, dp = _monomials(points - 0.5, e)                                     # (nc, ne, nb[, d])
+    return np.einsum("ceb,cbp->cep", p, inv), np.einsum("cebk,cbp->cepk", dp, inv)

@@ -55,3 +55,20 @@ def test_singular_moment_matrix_is_a_clear_error(xi, order):
     with pytest.raises(InputError, match="singular moment matrix in cell 7"):
         shape_functions(xi[None], np.ones((1, len(xi))), np.array([[[0.4, 0.4]]]), order,
                         cells=np.array([7]))
+
+
+@pytest.mark.parametrize("order", [1, 2, 3])
+def test_as_many_particles_as_monomials_is_lagrange_interpolation(order):
+    """With n_particles = n_basis the weights cancel: the direct interpolation path agrees with
+    the weighted normal equations (forced here by one zero-weight padding particle) and is
+    nodal (chi_p(x_q) = delta_pq)."""
+    xi = layout(order + 1, 2)[None] + 0.01
+    pts = np.random.default_rng(2).uniform(0.05, 0.95, (1, 9, 2))
+    direct, ddirect = shape_functions(xi, np.ones(xi.shape[:2]), pts, order)
+    padded = np.concatenate([xi, [[[0.5, 0.5]]]], axis=1)
+    mask = np.r_[np.ones(xi.shape[1]), 0.0][None]
+    weighted, dweighted = shape_functions(padded, mask, pts, order)
+    assert np.allclose(direct, weighted[:, :, :-1], atol=1e-8)
+    assert np.allclose(ddirect, dweighted[:, :, :-1], atol=1e-6)
+    nodal, _ = shape_functions(xi, np.ones(xi.shape[:2]), xi, order)
+    assert np.allclose(nodal[0], np.eye(xi.shape[1]), atol=1e-12)
