@@ -137,7 +137,7 @@ class GodunovScheme:
 
     def surface_residual(self, grid_state, time, dt):
         """-int Phi F_N* over all faces; also returns the power through the boundary (W)."""
-        R = np.zeros_like(grid_state.U)
+        R = np.zeros((self.n_dofs, grid_state.U.shape[1]))     # the unknowns may live on particles
         boundary, power = self.boundary_flux(grid_state, time)
         interior = self.interface_flux(grid_state)
         corr_int, corr_bnd = self.transverse_flux(interior, boundary, dt)
