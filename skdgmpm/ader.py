@@ -24,7 +24,6 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.polynomial import legendre
 
-from . import system
 from .dgfem import DGFEM
 from .scheme import GridState
 

@@ -18,12 +18,11 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from . import system
 from .ader import ADERDGFEM
 from .errors import InputError
 from .mls import shape_functions
 from .quadrature import cell_slots, interpolation_matrix, particle_basis
-from .scheme import GridState, ParticleState, cell_values
+from .scheme import GodunovScheme, GridState, cell_values
 
 BACKMAPS = ("pic", "flip")
 
@@ -174,19 +173,8 @@ class ADERDGMPM(ADERDGFEM):
                 U = self.S @ dofs
             else:
                 U = state.U + self.S @ (dofs - dofs_n)
-            d = self.d
-            F, p = system.split(U, d)
-            v = p / self.particles.rho0[:, None]
-            P = self.materials.stress(F, self.particles.material)
-            new = ParticleState(state.t + dt, U, system.join(P, v), state.x + dt * v, state.step + 1)
-            self.check(new)
-            return new, work
+            return self.constitutive_update(state, U, dt), work
 
         return self.step_with_cfl_guard(state, dt_max, attempt)
 
-    def initial_state(self, F, v, t=0.0):
-        P = self.materials.stress(F, self.particles.material)
-        U = system.join(F, self.particles.rho0[:, None] * v)
-        state = ParticleState(t, U, system.join(P, v), self.particles.X.copy())
-        self.check(state)
-        return state
+    initial_state = GodunovScheme.initial_state          # the state lives on the particles

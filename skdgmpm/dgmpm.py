@@ -19,7 +19,7 @@ from .errors import InputError
 from .faces import interior_faces
 from .quadrature import ParticleMap, VolumeOperators, interpolation_matrix, particle_basis
 from .riemann import transverse_positive
-from .scheme import GodunovScheme, GridState, ParticleState, cell_values
+from .scheme import GodunovScheme, GridState, cell_values
 
 
 @dataclass
@@ -188,25 +188,7 @@ class DGMPM(GodunovScheme):
         """(g) U_p = sum_i S_ip U_i [R18 eq 40] (PIC)."""
         return self.map.interpolate(U_nodes)
 
-    def constitutive_update(self, state, U, dt):
-        """(h) P_p = P(F_p), v_p = p_p / rho0_p, positions x += dt v [R18 eq 41-42]."""
-        d = self.d
-        F, p = system.split(U, d)
-        v = p / self.particles.rho0[:, None]
-        P = self.materials.stress(F, self.particles.material)
-        new = ParticleState(state.t + dt, U, system.join(P, v), state.x + dt * v, state.step + 1)
-        self.check(new)
-        return new
-
     # ---------------------------------------------------------------- driver-facing
-    def initial_state(self, F, v, t=0.0):
-        """ParticleState from particle F (n, d, d) and v (n, d)."""
-        P = self.materials.stress(F, self.particles.material)
-        U = system.join(F, self.particles.rho0[:, None] * v)
-        state = ParticleState(t, U, system.join(P, v), self.particles.X.copy())
-        self.check(state)
-        return state
-
     def step(self, state, dt_max=np.inf):
         grid_state = self.project(state)
 

@@ -157,6 +157,24 @@ class GodunovScheme:
 
     speed_factor = 1.0
 
+    def constitutive_update(self, state, U, dt):
+        """(h) P_p = P(F_p), v_p = p_p / rho0_p, positions x += dt v [R18 eq 41-42]."""
+        d = self.d
+        F, p = system.split(U, d)
+        v = p / self.particles.rho0[:, None]
+        P = self.materials.stress(F, self.particles.material)
+        new = ParticleState(state.t + dt, U, system.join(P, v), state.x + dt * v, state.step + 1)
+        self.check(new)
+        return new
+
+    def initial_state(self, F, v, t=0.0):
+        """ParticleState from particle F (n, d, d) and v (n, d)."""
+        P = self.materials.stress(F, self.particles.material)
+        U = system.join(F, self.particles.rho0[:, None] * v)
+        state = ParticleState(t, U, system.join(P, v), self.particles.X.copy())
+        self.check(state)
+        return state
+
     def step_with_cfl_guard(self, state, dt_max, attempt):
         """Run ``attempt(dt) -> (new state, boundary work)``; repeat with a smaller Delta t if the
         waves of the new state are faster than the CFL condition allowed (e.g. the first step of

@@ -202,7 +202,7 @@ class GridReference:
         self.stepper, self.dofs, self.t = st, result.state.dofs, result.state.t
 
     def fields(self, X, t):
-        from . import output, system
+        from . import output
         from .particles import Particles, locate
         from .quadrature import interpolation_matrix, particle_basis
         from .scheme import ParticleState
