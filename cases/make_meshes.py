@@ -11,11 +11,16 @@ import meshio
 import numpy as np
 
 
-def plate(path, lx=4.0, ly=3.0, nx=33, ny=25, impact=1.0):
+def plate(path, lx=4.0, ly=3.0, nx=33, ny=25, impact=1.0, distort=0.0):
     """Rectangular plate [0, lx] x [0, ly]; boundaries impact (left, y <= impact), left (rest),
-    bottom, right, top."""
+    bottom, right, top. ``distort`` > 0 moves the interior nodes by up to that fraction of a cell
+    (a non-uniform quad mesh with straight boundaries)."""
     x, y = np.linspace(0, lx, nx + 1), np.linspace(0, ly, ny + 1)
     X, Y = np.meshgrid(x, y)
+    if distort:
+        inner = (X > 0) & (X < lx) & (Y > 0) & (Y < ly)
+        X = X + inner * distort * lx / nx * np.sin(2 * np.pi * Y / ly) * np.sin(3 * np.pi * X / lx)
+        Y = Y + inner * distort * ly / ny * np.sin(2 * np.pi * X / lx) * np.sin(np.pi * Y / ly)
     points = np.column_stack([X.ravel(), Y.ravel()])
     n = np.arange(points.shape[0]).reshape(ny + 1, nx + 1)
     quads = np.column_stack([n[:-1, :-1].ravel(), n[:-1, 1:].ravel(), n[1:, 1:].ravel(), n[1:, :-1].ravel()])
