@@ -136,21 +136,16 @@ def test_missing_scene_file_and_bad_toml(capsys, here):
     assert_no_output(here / "out")
 
 
-def test_unknown_key_in_scene_file(capsys, here):
-    path = here / "typo.toml"
-    path.write_text(scene_text("bar_elastic_1d", replace=[("cells = 150", "cellz = 3")]))
+@pytest.mark.parametrize("name, edit, expected", [
+    ("typo.toml", ("cells = 150", "cellz = 3"), ("grid.cellz", "not a known key")),          # unknown key
+    ("typed.toml", ("E = 2.0e11", 'E = "steel"'), ("material.E", "'steel'")),              # bad type
+])
+def test_bad_key_or_value_in_scene_file(capsys, here, name, edit, expected):
+    path = here / name
+    path.write_text(scene_text("bar_elastic_1d", replace=[edit]))
     rc, _, err = cli(capsys, "run", path, "--out", here / "out")
     assert rc == 2
-    one_line_error(err, str(path), "grid.cellz", "not a known key")
-    assert_no_output(here / "out")
-
-
-def test_badly_typed_value_in_scene_file(capsys, here):
-    path = here / "typed.toml"
-    path.write_text(scene_text("bar_elastic_1d", replace=[("E = 2.0e11", 'E = "steel"')]))
-    rc, _, err = cli(capsys, "run", path, "--out", here / "out")
-    assert rc == 2
-    one_line_error(err, str(path), "material.E", "'steel'")
+    one_line_error(err, str(path), *expected)
     assert_no_output(here / "out")
 
 
