@@ -111,24 +111,27 @@ class ADERDGFEM(DGFEM):
     def predictor(self, U_points, dt):
         """Space-time predictor: (u_hat, q_hat) of shape (P+1, nel, nq, nc) and the iterations."""
         nel, nq = self.basis.dx.shape
-        U = U_points.reshape(nel, nq, -1)
+        return self._picard(U_points.reshape(nel, nq, -1), dt, self._law, self.D_points, self.D_points)
+
+    def _picard(self, U, dt, law, D, D_taylor):
+        """Picard iterations of L23 eq 62 on per-cell values U (nel, n, nc) at t_n, with the law
+        ``law`` on (..., nel, n, nc) arrays, the predictor's derivative matrices D and those of the
+        Taylor guess D_taylor (d, nel, n, n). Returns (u_hat, q_hat), (P+1, nel, n, nc)."""
         u_hat = np.broadcast_to(U[None], (len(self.tau),) + U.shape)
         if self.picard_guess == "taylor":                                       # L23 eq 64
-            u_hat = u_hat - dt * self.tau[:, None, None, None] * self._divergence(self._law(U))[None]
+            u_hat = u_hat - dt * self.tau[:, None, None, None] * self._divergence(law(U), D_taylor)[None]
         d = self.d                                  # change measured per block (F, p)
         scale = np.ones(U.shape[-1])
         scale[: d * d] = np.abs(U[..., : d * d]).max() or 1.0
         scale[d * d:] = np.abs(U[..., d * d:]).max() or 1.0
         for it in range(1, self.picard_max + 1):
-            q_hat = self._law(u_hat)
-            div = self._divergence(q_hat)
-            new = U[None] - dt * np.einsum("st,tenc->senc", self.T_tau, div)
+            new = U[None] - dt * np.einsum("st,tenc->senc", self.T_tau, self._divergence(law(u_hat), D))
             change = np.max(np.abs(new - u_hat) / scale)
             u_hat = new
             if change <= self.picard_tol:
                 break
         self.picard.add(it, change <= self.picard_tol)
-        return u_hat, self._law(u_hat)
+        return u_hat, law(u_hat)
 
     # ---------------------------------------------------------------- corrector
     def _coefficients(self, values):

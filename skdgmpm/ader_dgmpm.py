@@ -128,27 +128,18 @@ class ADERDGMPM(ADERDGFEM):
 
     def predictor(self, U_particles, dt):
         """Space-time predictor with dofs at the particles: (u_hat, q_hat) (P+1, n_particles, nc)."""
-        nel = self.basis.dx.shape[0]
-        U = self._padded(U_particles)
-        law = self._law_particles
-        u_hat = np.broadcast_to(U[None], (len(self.tau),) + U.shape)
-        if self.picard_guess == "taylor":                                   # L23 eq 64
-            div0 = self._divergence(self._padded(law(U_particles)), self.grad_at_particles)
-            u_hat = u_hat - dt * self.tau[:, None, None, None] * div0[None]
-        d = self.d
-        scale = np.ones(U.shape[-1])
-        scale[: d * d] = np.abs(U_particles[:, : d * d]).max() or 1.0
-        scale[d * d:] = np.abs(U_particles[:, d * d:]).max() or 1.0
-        for it in range(1, self.picard_max + 1):
-            q_hat = np.stack([self._padded(law(u.reshape(nel * self.n_max, -1)[self.slot])) for u in u_hat])
-            new = U[None] - dt * np.einsum("st,tenc->senc", self.T_tau, self._divergence(q_hat, self.D_particles))
-            change = np.max(np.abs(new - u_hat) / scale)
-            u_hat = new
-            if change <= self.picard_tol:
-                break
-        self.picard.add(it, change <= self.picard_tol)
-        flat = u_hat.reshape(len(self.tau), nel * self.n_max, -1)[:, self.slot]
-        return flat, np.stack([law(u) for u in flat])
+        u_hat, q_hat = self._picard(self._padded(U_particles), dt, self._law_cells, self.D_particles,
+                                    self.grad_at_particles)
+        unpad = lambda a: a.reshape(len(self.tau), -1, a.shape[-1])[:, self.slot]
+        return unpad(u_hat), unpad(q_hat)
+
+    def _law_cells(self, U):
+        """The law at the particles on padded (..., nel, n_max, nc) arrays (padding stays zero)."""
+        nc = U.shape[-1]
+        real = U.reshape(-1, len(self.mask), nc)[:, self.slot]                 # (batch, n_particles, nc)
+        out = np.zeros((len(real), len(self.mask), nc))
+        out[:, self.slot] = np.stack([self._law_particles(r) for r in real])
+        return out.reshape(U.shape)
 
     def _law_particles(self, U):
         return self.point_state(U, self.particles.cell, self.particles.rho0)
