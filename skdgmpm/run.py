@@ -223,16 +223,24 @@ def _plots(result, folder):
 
 
 class _NoBar:
-    def update(self, _):
+    def set_description(self, _):
+        pass
+
+    def update(self, n=1):
         pass
 
     def close(self):
         pass
 
 
-def _progress(total, name, enabled):
+def progress_bar(enabled, total, **options):
+    """A tqdm bar on stderr (notebook widget in Jupyter), or a silent stand-in."""
     if not enabled:
         return _NoBar()
     from tqdm.auto import tqdm
-    return tqdm(total=total, desc=name, unit="s", file=sys.stderr, leave=False,
-                bar_format="{desc}: {percentage:3.0f}%|{bar}| t={n:.3g}/{total:.3g} s [{elapsed}<{remaining}]")
+    return tqdm(total=total, file=sys.stderr, leave=False, **options)
+
+
+def _progress(total, name, enabled):
+    return progress_bar(enabled, total, desc=name, unit="s",
+                        bar_format="{desc}: {percentage:3.0f}%|{bar}| t={n:.3g}/{total:.3g} s [{elapsed}<{remaining}]")

@@ -1,13 +1,12 @@
 """Convergence studies: one scene, several methods, orders and grids; errors against the scene's
 exact solution, observed rates, wall time and dofs (speed against error)."""
 import csv
-import sys
 from dataclasses import dataclass
 
 import numpy as np
 
 from .errors import InputError
-from .run import run
+from .run import progress_bar, run
 from .scene import load_scene
 
 # particles per cell of ADER-DGMPM at order P: (P+1)^d at the parent coordinates of L23 §5.1
@@ -75,7 +74,7 @@ def convergence(scene_name, methods, orders, cells, overrides=(), fields=None, p
 
     variants = [resolved(Variant.parse(m)) for m in methods]
     runs = [(v, p, n) for v in variants for p in (orders if v.name != "dgmpm" else [1]) for n in cells]
-    bar = _bar(len(runs), progress)
+    bar = progress_bar(progress, len(runs), unit="run")
     rows = []
     size = base.get("grid.size") or [base.get("grid.length")]
     for v, p, n in runs:
@@ -170,24 +169,6 @@ def plot(rows, folder):
         fig.tight_layout()
         fig.savefig(folder / name, dpi=110)
         plt.close(fig)
-
-
-class _Quiet:
-    def set_description(self, _):
-        pass
-
-    def update(self, n=1):
-        pass
-
-    def close(self):
-        pass
-
-
-def _bar(total, enabled):
-    if not enabled:
-        return _Quiet()
-    from tqdm.auto import tqdm
-    return tqdm(total=total, unit="run", file=sys.stderr, leave=False)
 
 
 class GridReference:
