@@ -14,7 +14,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import system
-from .bcs import FREE
 from .errors import InputError
 from .faces import interior_faces
 from .quadrature import ParticleMap, VolumeOperators, interpolation_matrix, particle_basis
@@ -97,11 +96,9 @@ class DGMPM(GodunovScheme):
         frame = np.zeros((len(self.boundary), 2, 2))
         free_v = np.zeros((len(self.boundary), 2), bool)
         free_t = np.zeros((len(self.boundary), 2), bool)
-        for k, bc in [(-1, FREE)] + [(k, bc) for k, (_, bc) in enumerate(self.bcs)]:
-            sel = self.boundary_bc == k
-            if sel.any():
-                frame[sel], imp_v, imp_t = bc.constraints(self.boundary.normal[sel])
-                free_v[sel], free_t[sel] = ~imp_v, ~imp_t
+        for sel, bc in self.bc_groups:
+            frame[sel], imp_v, imp_t = bc.constraints(self.boundary.normal[sel])
+            free_v[sel], free_t[sel] = ~imp_v, ~imp_t
         self.ctu_boundary = (frame, free_v, free_t)
 
     # ---------------------------------------------------------------- stages

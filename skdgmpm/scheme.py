@@ -84,6 +84,10 @@ class GodunovScheme:
             which[m.boundaries[name]] = k
         self.boundary = boundary_faces(m, element, facets, self.n_dofs, **self.face_options)
         self.boundary_bc = which[self.boundary.facets]
+        # boundary faces grouped by condition, once (faces without one are free)
+        conditions = [FREE] + [bc for _, bc in self.bcs]
+        self.bc_groups = [(self.boundary_bc == k, conditions[k + 1]) for k in range(-1, len(self.bcs))]
+        self.bc_groups = [(sel, bc) for sel, bc in self.bc_groups if sel.any()]
 
     def face_values(self, T, grid_state, cells):
         """(Q, F, rho0) on one side of a face set: ((nf, ncomp), (nf, d, d), (nf,))."""
@@ -106,11 +110,8 @@ class GodunovScheme:
         t_L, v_L, C, rho, Q_L = self._side(b, self.face_operator(b, "L"), grid_state, b.cell_L)
         Z = impedance(C, b.normal, rho)
         t_s, v_s = t_L.copy(), v_L.copy()
-        for k, (_, bc) in [(-1, (None, None))] + list(enumerate(self.bcs)):
-            sel = self.boundary_bc == k
-            if not sel.any():
-                continue
-            t_s[sel], v_s[sel] = (bc or FREE).star(time, t_L[sel], v_L[sel], Z[sel], b.normal[sel])
+        for sel, bc in self.bc_groups:
+            t_s[sel], v_s[sel] = bc.star(time, t_L[sel], v_L[sel], Z[sel], b.normal[sel])
         flux = system.normal_flux(t_s, v_s, b.normal)
         fs = FaceStates(t_L, v_L, C, rho, Z, flux,
                         fluct_L=flux - system.normal_flux(t_L, v_L, b.normal))
