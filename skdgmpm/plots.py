@@ -39,24 +39,61 @@ def line_particles(result, axis=0):
     return sel[np.argsort(X[sel, axis])]
 
 
-def profile(result, path=None, field="P11", state=None, ax=None):
-    """A field along the bottom line (2D) or the bar (1D), with the exact solution if any."""
-    plt = _figure()
-    fig = None
-    if ax is None:
-        fig, ax = plt.subplots(figsize=(6, 3.5))
-    state = state or result.state
+def segment_particles(result, start, end, tol=None):
+    """Particles whose reference position lies within ``tol`` of the segment [start, end], sorted
+    along it, and their distance from ``start``. ``tol`` defaults to half a particle spacing."""
+    X = result.X
+    a, b = np.asarray(start, dtype=float), np.asarray(end, dtype=float)
+    length = np.linalg.norm(b - a)
+    if a.shape != (X.shape[1],) or b.shape != a.shape or not length > 0:
+        raise ValueError(f"segment {start!r} -> {end!r}: expected two distinct points of dimension {X.shape[1]}")
+    if tol is None:
+        tol = 0.5 * np.median(result.disc.particles.volume) ** (1.0 / X.shape[1])
+    s = (X - a) @ (b - a) / length
+    off = np.linalg.norm(X - a - np.outer(s / length, b - a), axis=1)
+    sel = np.flatnonzero((off <= tol) & (s >= -tol) & (s <= length + tol))
+    order = np.argsort(s[sel])
+    return sel[order], s[sel][order]
+
+
+def bottom_segment(result):
+    """The bar (1D) or the line of particles of smallest X2 (2D), as (start, end)."""
     idx = line_particles(result)
+    X = result.X[idx]
+    return X[0], X[-1]
+
+
+def line(result, field="P11", state=None, start=None, end=None, ax=None):
+    """``field`` along the segment [start, end] (default: the bottom line) at the particles,
+    against the exact solution on the segment when the scene has one. Draws into ``ax``."""
+    state = state or result.state
+    if start is None and end is None:
+        start, end = bottom_segment(result)
+    a, b = np.asarray(start, dtype=float), np.asarray(end, dtype=float)
+    idx, s = segment_particles(result, a, b)
+    horizontal = np.allclose((b - a)[1:], 0.0) and b[0] > a[0]
+    abscissa = (lambda dist: a[0] + dist) if horizontal else (lambda dist: dist)
     values = result.fields(state)[field][idx]
-    X = result.X[idx, 0]
-    ax.plot(X, values, "o", ms=3, label=f"{result.summary()['method']} (t = {state.t:.3g} s)")
-    if result.exact is not None:
-        fine = np.linspace(X.min(), X.max(), 2000)
-        ax.plot(fine, result.exact.fields(fine[:, None], state.t)[field], "k-", lw=1, label="exact")
-    ax.set_xlabel("X (m)")
+    ax.plot(abscissa(s), values, "o", ms=3, label=f"{result.summary()['method']} (t = {state.t:.3g} s)")
+    exact = result.exact.fields(a[None, :], state.t) if result.exact is not None else {}
+    if field in exact:
+        dist = np.linspace(0.0, np.linalg.norm(b - a), 2000)
+        points = a + np.outer(dist / dist[-1], b - a)
+        ax.plot(abscissa(dist), result.exact.fields(points, state.t)[field], "k-", lw=1, label="exact")
+    ax.set_xlabel("X1 (m)" if horizontal else f"distance from {tuple(np.round(a, 6))} (m)")
     ax.set_ylabel(field)
     ax.legend(fontsize=8)
     ax.set_title(result.scene.get("title", result.scene.name))
+    return ax
+
+
+def profile(result, path=None, field="P11", state=None, ax=None):
+    """A field along the bottom line (2D) or the bar (1D), with the exact solution if any."""
+    fig = None
+    if ax is None:                    # only then touch pyplot: a given axes keeps the user's backend
+        plt = _figure()
+        fig, ax = plt.subplots(figsize=(6, 3.5))
+    line(result, field, state, ax=ax)
     if fig is not None and path is not None:
         fig.tight_layout()
         fig.savefig(path, dpi=110)
