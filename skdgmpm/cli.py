@@ -60,12 +60,15 @@ def _cmd_converge(args):
     rows = study.convergence(args.scene, [m for m in args.methods.split(",") if m],
                              study._int_list(args.orders, "--orders"), study._int_list(args.cells, "--cells"),
                              overrides=args.set, fields=[f for f in (args.fields or "").split(",") if f] or None,
-                             progress=not args.quiet, reference=args.reference)
+                             progress=not args.quiet, reference=args.reference,
+                             cfls=study._float_list(args.cfls, "--cfls") if args.cfls else None,
+                             measure=args.measure)
     print(study.format_table(rows))
     out.mkdir(parents=True, exist_ok=True)
     study.write_csv(out / "convergence.csv", rows)
     study.plot(rows, out)
-    print(f"-> {out}/convergence.csv, error_vs_h.png, error_vs_time.png")
+    sweep = "h" if len({r["cells"] for r in rows}) > 1 else "cfl"
+    print(f"-> {out}/convergence.csv, error_vs_{sweep}.png, error_vs_time.png")
     return 0
 
 
@@ -85,9 +88,15 @@ def main(argv=None):
     p = sub.add_parser("converge", help="convergence study against a scene's exact solution")
     p.add_argument("scene", help="scene with an exact solution, e.g. standing_wave_2d")
     p.add_argument("--methods", default="dgmpm,rk-dgfem",
-                   help="comma-separated: dgmpm, rk-dgfem; method/integrator picks a time integrator")
+                   help="comma-separated: dgmpm, rk-dgfem, ader-dgfem, ader-dgmpm, mpm; method/integrator "
+                        "picks a time integrator (rk-dgfem/rk2), mpm/UPDATE-SHAPE an MPM variant (mpm/cd-cpgimp)")
     p.add_argument("--orders", default="1,2,3", help="orders P of the high-order methods")
     p.add_argument("--cells", default="4,8,16", help="cells per direction")
+    p.add_argument("--cfls", default=None,
+                   help="CFL numbers (default: the scene's); one grid and several CFLs is a temporal study")
+    p.add_argument("--measure", default="l2", choices=("l2", "wg08"),
+                   help="l2: relative L2 error of each field at the end; wg08: max displacement error "
+                        "over all particles and steps (needs a manufactured solution)")
     p.add_argument("--fields", default=None, help="fields to report (default: all of the exact solution)")
     p.add_argument("--reference", default=None, metavar="METHOD:P:CELLS",
                    help="fine DGFEM run to compare with when the scene has no exact solution, "

@@ -111,9 +111,11 @@ def compute_errors(disc, state, solution):
             for k in exact if k in fields}
 
 
-def run(scene, overrides=(), out=None, force=False, progress=True, frames=None, max_steps=None):
+def run(scene, overrides=(), out=None, force=False, progress=True, frames=None, max_steps=None,
+        on_step=None):
     """Run ``scene`` (a `Scene`, a name or a path). Writes outputs to ``out`` if given.
-    ``max_steps`` stops the run early (benchmarks).
+    ``max_steps`` stops the run early (benchmarks); ``on_step(state)`` is called with the initial
+    state and after every step (error measures over the whole run, e.g. WG08's).
 
     Output is written to ``<out>.partial`` and renamed at the end, so a failed start leaves
     nothing behind; an existing non-empty ``out`` is an error unless ``force``.
@@ -145,14 +147,16 @@ def run(scene, overrides=(), out=None, force=False, progress=True, frames=None, 
         shutil.rmtree(partial, ignore_errors=True)
         partial.mkdir(parents=True)
     try:
-        return _run(scene, disc, solution, stepper, state, t_end, n_frames, out, partial, progress, max_steps)
+        return _run(scene, disc, solution, stepper, state, t_end, n_frames, out, partial, progress, max_steps,
+                    on_step)
     except BaseException:                 # crash or Ctrl-C: leave no half-written output behind
         if partial is not None:
             shutil.rmtree(partial, ignore_errors=True)
         raise
 
 
-def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, partial, progress, max_steps=None):
+def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, partial, progress, max_steps=None,
+         on_step=None):
     if partial is not None:
         output.write_grid(partial / "grid.vtu", disc.grid)
 
@@ -175,6 +179,8 @@ def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, partial, p
 
     record(state)
     snapshot(state)
+    if on_step is not None:
+        on_step(state)
     next_frame = 1
     status, message = "ok", ""
     bar = _progress(t_end, scene.name, progress)
@@ -185,6 +191,8 @@ def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, partial, p
             bar.update(new.t - state.t)
             state = new
             record(state)
+            if on_step is not None:
+                on_step(state)
             if state.t >= next_frame * t_end / max(n_frames, 1) * (1 - 1e-12):
                 snapshot(state)
                 while next_frame * t_end / max(n_frames, 1) <= state.t * (1 + 1e-12):

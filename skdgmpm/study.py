@@ -7,17 +7,20 @@ import numpy as np
 
 from .errors import InputError
 from .run import progress_bar, run
-from .scene import load_scene
+from .scene import exact_solution, load_scene
 
 # particles per cell of ADER-DGMPM at order P: (P+1)^d at the parent coordinates of L23 §5.1
 L23_LAYOUT = {1: "[0.25, 0.75]", 2: "[0.25, 0.5, 0.75]", 3: "[0.2, 0.4, 0.6, 0.8]"}
 
-DEFAULT_INTEGRATOR = {"dgmpm": "euler", "rk-dgfem": "rk4", "ader-dgfem": "ader", "ader-dgmpm": "ader"}
+DEFAULT_INTEGRATOR = {"dgmpm": "euler", "rk-dgfem": "rk4", "ader-dgfem": "ader", "ader-dgmpm": "ader",
+                      "mpm": "cd-cpgimp"}
+MEASURES = ("l2", "wg08")
 
 
 @dataclass(frozen=True)
 class Variant:
-    """A method with its options, written ``name`` or ``name/integrator`` (e.g. rk-dgfem/rk2)."""
+    """A method with its options, written ``name`` or ``name/integrator`` (e.g. rk-dgfem/rk2);
+    for MPM the integrator is ``update-shape`` (e.g. mpm/cd-cpgimp, mpm/usl)."""
 
     name: str
     integrator: str
@@ -33,6 +36,17 @@ class Variant:
     def label(self):
         return f"{self.name}/{self.integrator}"
 
+    @property
+    def first_order(self):
+        return self.name in ("dgmpm", "mpm")
+
+    def overrides(self, order):
+        """Scene overrides that select this variant at order ``order``."""
+        if self.name == "mpm":
+            update, _, shape = self.integrator.partition("-")
+            return ['method.name="mpm"', f'method.update="{update}"'] + ([f'method.shape="{shape}"'] if shape else [])
+        return [f'method.name="{self.name}"', f'method.integrator="{self.integrator}"', f"method.order={order}"]
+
 
 def _int_list(text, option):
     try:
@@ -44,20 +58,52 @@ def _int_list(text, option):
     return values
 
 
-def convergence(scene_name, methods, orders, cells, overrides=(), fields=None, progress=True,
-                reference=None):
-    """Run every (method, order, grid) and return one row per run.
+def _float_list(text, option):
+    try:
+        values = [float(v) for v in str(text).split(",") if v.strip()]
+    except ValueError:
+        raise InputError(f"{option} {text!r}: expected comma-separated numbers") from None
+    if not values or min(values) <= 0:
+        raise InputError(f"{option} {text!r}: expected numbers > 0")
+    return values
 
-    Rows: method, order, cells, h, dofs, steps, wall_s, and ``L2_<field>`` (relative L2 error at
-    the method's points: particles for DGMPM, Gauss points for DGFEM) plus ``rate_<field>``
-    (observed order against the previous grid of the same method and order). Errors are taken
-    against the scene's exact solution, or against ``reference`` = "method/integrator:P:cells"
-    (a fine DGFEM run) for scenes without one. ADER-DGMPM runs use (P+1)^d particles per cell at
-    the L23 §5.1 parent coordinates.
+
+class DisplacementError:
+    """WG08 eq 64-65: max over all particles and all steps of |(x_p - X_p) - u(X_p, t)| (m)."""
+
+    def __init__(self, solution):
+        self.solution, self.X, self.value = solution, None, 0.0
+
+    def __call__(self, state):
+        if self.X is None:                      # the initial state: particles at X
+            self.X = state.x.copy()
+        u = self.solution.displacement(self.X, state.t)
+        self.value = max(self.value, float(np.max(np.linalg.norm(state.x - self.X - u, axis=1))))
+
+
+def convergence(scene_name, methods, orders, cells, overrides=(), fields=None, progress=True,
+                reference=None, cfls=None, measure="l2"):
+    """Run every (method, order, grid, CFL) and return one row per run.
+
+    Rows: method, order, cells, h, cfl, dt (mean step), dofs, steps, wall_s, status, and the
+    errors with observed rates: ``measure="l2"`` gives ``L2_<field>`` (relative L2 error at the
+    method's points at the end: particles for DGMPM/MPM, Gauss points for DGFEM) and
+    ``rate_<field>``; ``measure="wg08"`` gives ``Linf_u``, the WG08 displacement error (max over
+    particles and steps) and ``rate_u``. Rates are taken along the grids (several ``cells``) or,
+    for a temporal study at one grid, along the CFL numbers (against the mean step).
+
+    Errors are taken against the scene's exact solution, or against ``reference`` =
+    "method/integrator:P:cells" (a fine DGFEM run, L2 only) for scenes without one. A run that
+    goes unstable records error 1 (WG08's convention) and the study goes on. ADER-DGMPM runs use
+    (P+1)^d particles per cell at the L23 §5.1 parent coordinates.
     """
+    if measure not in MEASURES:
+        raise InputError(f"--measure {measure!r}: expected one of {', '.join(MEASURES)}")
     base = load_scene(scene_name, overrides)
     ref = None
     if reference is not None:
+        if measure != "l2":
+            raise InputError("--reference works with --measure l2 only")
         ref = _reference_run(base, reference, progress)
     elif base.get("exact") is None:
         raise InputError(f"{base.where('exact')}: a convergence study needs a scene with an exact "
@@ -65,39 +111,54 @@ def convergence(scene_name, methods, orders, cells, overrides=(), fields=None, p
     if "mesh" in base.data["grid"]:
         raise InputError(f"{base.where('grid.mesh')}: convergence studies refine generated grids only")
     scene_method = base.data["method"]
+    if measure == "wg08" and not hasattr(exact_solution(base), "displacement"):
+        raise InputError(f"{base.where('exact')}: --measure wg08 needs an exact displacement "
+                         f"(a manufactured solution)")
 
     def resolved(v):            # the scene's integrator for its own method, else the default
         if v.integrator:
             return v
-        same = scene_method.get("name", "dgmpm") == v.name and "integrator" in scene_method
-        return Variant(v.name, scene_method["integrator"] if same else DEFAULT_INTEGRATOR[v.name])
+        same = scene_method.get("name", "dgmpm") == v.name
+        if same and v.name == "mpm" and ("update" in scene_method or "shape" in scene_method):
+            default_update, _, default_shape = DEFAULT_INTEGRATOR["mpm"].partition("-")
+            return Variant("mpm", f"{scene_method.get('update', default_update)}-"
+                                  f"{scene_method.get('shape', default_shape)}")
+        if same and "integrator" in scene_method:
+            return Variant(v.name, scene_method["integrator"])
+        return Variant(v.name, DEFAULT_INTEGRATOR[v.name])
 
     variants = [resolved(Variant.parse(m)) for m in methods]
-    runs = [(v, p, n) for v in variants for p in (orders if v.name != "dgmpm" else [1]) for n in cells]
+    cfl_list = cfls or [float(scene_method.get("cfl", 1.0))]
+    runs = [(v, p, n, c) for v in variants for p in ([1] if v.first_order else orders)
+            for c in cfl_list for n in cells]
     bar = progress_bar(progress, len(runs), unit="run")
     rows = []
     size = base.get("grid.size") or [base.get("grid.length")]
-    for v, p, n in runs:
-        bar.set_description(f"{v.label} P{p} {n} cells")
+    for v, p, n, c in runs:
+        bar.set_description(f"{v.label} P{p} {n} cells CFL {c:g}")
         grid = f"grid.cells=[{n}, {n}]" if base.dim == 2 else f"grid.cells={n}"
         layout = [f"particles.per_cell={L23_LAYOUT[p]}"] if v.name == "ader-dgmpm" and p in L23_LAYOUT else []
-        result = run(base, [f'method.name="{v.name}"', f'method.integrator="{v.integrator}"',
-                            f"method.order={p}", grid, *layout], progress=False)
-        if result.status != "ok":
-            raise InputError(f"{v.label} P{p} with {n} cells stopped: {result.message}")
+        monitor = DisplacementError(exact_solution(base)) if measure == "wg08" else None
+        result = run(base, [*v.overrides(p), grid, f"method.cfl={c}", *layout], progress=False,
+                     on_step=monitor)
         summary = result.summary()
-        row = {"method": v.label, "order": p, "cells": n, "h": float(size[0]) / n,
-               "dofs": summary["dofs"], "steps": summary["steps"], "wall_s": summary["wall_s"]}
-        errors = result.errors if ref is None else reference_errors(result, ref, fields or ("eps11", "P11", "v1"))
-        for name in fields or errors:
-            if name not in errors:
-                raise InputError(f"--fields: {name!r} is not a field of the exact solution "
-                                 f"(known: {', '.join(errors)})")
-            row[f"L2_{name}"] = errors[name]["L2_rel"]
+        row = {"method": v.label, "order": p, "cells": n, "h": float(size[0]) / n, "cfl": c,
+               "dt": summary["t_final"] / max(summary["steps"], 1), "dofs": summary["dofs"],
+               "steps": summary["steps"], "wall_s": summary["wall_s"], "status": result.status}
+        if measure == "wg08":
+            row["Linf_u"] = monitor.value if result.status == "ok" else 1.0
+        else:
+            errors = (result.errors if ref is None
+                      else reference_errors(result, ref, fields or ("eps11", "P11", "v1")))
+            for name in fields or errors:
+                if name not in errors:
+                    raise InputError(f"--fields: {name!r} is not a field of the exact solution "
+                                     f"(known: {', '.join(errors)})")
+                row[f"L2_{name}"] = errors[name]["L2_rel"] if result.status == "ok" else 1.0
         rows.append(row)
         bar.update()
     bar.close()
-    _rates(rows)
+    _rates(rows, along="h" if len(cells) > 1 else "dt")
     return rows
 
 
@@ -110,33 +171,42 @@ def _reference_run(base, text, progress):
         raise InputError(f"--reference {text!r}: expected METHOD[/INTEGRATOR]:P:CELLS, "
                          f"e.g. rk-dgfem/rk4:3:40") from None
     grid = f"grid.cells=[{cells}, {cells}]" if base.dim == 2 else f"grid.cells={cells}"
-    result = run(base, [f'method.name="{v.name}"', f'method.integrator="{v.integrator or DEFAULT_INTEGRATOR[v.name]}"',
-                        f"method.order={order}", grid], progress=progress)
+    v = v if v.integrator else Variant(v.name, DEFAULT_INTEGRATOR[v.name])
+    result = run(base, [*v.overrides(order), grid], progress=progress)
     if result.status != "ok":
         raise InputError(f"--reference run stopped: {result.message}")
     return GridReference(result)
 
 
-def _rates(rows):
+def error_keys(row):
+    """The error columns of a row: [(column, field)], e.g. ("L2_P11", "P11"), ("Linf_u", "u")."""
+    return [(k, k.split("_", 1)[1]) for k in row if k.startswith(("L2_", "Linf_"))]
+
+
+def _rates(rows, along="h"):
+    """Observed orders between successive runs of a series: along the grids (same method, order
+    and CFL) or, for ``along="dt"``, along the CFL numbers at one grid."""
     previous = {}
     for row in rows:
-        key = (row["method"], row["order"])
-        for name in [k[3:] for k in row if k.startswith("L2_")]:
-            before = previous.get(key)
-            row[f"rate_{name}"] = (float(np.log(before[f"L2_{name}"] / row[f"L2_{name}"]) /
-                                         np.log(before["h"] / row["h"])) if before else float("nan"))
+        key = (row["method"], row["order"], row["cfl"] if along == "h" else row["cells"])
+        before = previous.get(key)
+        for column, name in error_keys(row):
+            ok = before is not None and row["status"] == before["status"] == "ok"
+            row[f"rate_{name}"] = (float(np.log(before[column] / row[column]) /
+                                         np.log(before[along] / row[along])) if ok else float("nan"))
         previous[key] = row
 
 
 def format_table(rows):
-    fields = [k[3:] for k in rows[0] if k.startswith("L2_")]
-    head = f"{'method':<16}{'P':>2}{'cells':>6}{'h':>9}{'dofs':>8}{'wall s':>8}"
-    head += "".join(f"{'L2 ' + f:>12}{'rate':>6}" for f in fields)
+    columns = error_keys(rows[0])
+    head = f"{'method':<16}{'P':>2}{'cells':>6}{'h':>9}{'CFL':>6}{'dofs':>8}{'wall s':>8}"
+    head += "".join(f"{column.replace('_', ' '):>12}{'rate':>6}" for column, _ in columns)
     lines = [head, "-" * len(head)]
     for r in rows:
-        line = f"{r['method']:<16}{r['order']:>2}{r['cells']:>6}{r['h']:>9.4f}{r['dofs']:>8}{r['wall_s']:>8.2f}"
-        line += "".join(f"{r['L2_' + f]:>12.3e}{r['rate_' + f]:>6.2f}" for f in fields)
-        lines.append(line)
+        line = (f"{r['method']:<16}{r['order']:>2}{r['cells']:>6}{r['h']:>9.4f}{r['cfl']:>6.2f}"
+                f"{r['dofs']:>8}{r['wall_s']:>8.2f}")
+        line += "".join(f"{r[column]:>12.3e}{r['rate_' + name]:>6.2f}" for column, name in columns)
+        lines.append(line + ("" if r["status"] == "ok" else f"  {r['status']}"))
     return "\n".join(lines)
 
 
@@ -148,22 +218,29 @@ def write_csv(path, rows):
 
 
 def plot(rows, folder):
-    """error_vs_h.png and error_vs_time.png (speed against error), one line per method/order."""
+    """error_vs_h.png (or error_vs_cfl.png for a study at one grid) and error_vs_time.png
+    (speed against error), one line per method/order (and CFL)."""
     import matplotlib
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
-    fields = [k[3:] for k in rows[0] if k.startswith("L2_")]
+    columns = error_keys(rows[0])
+    spatial = len({r["cells"] for r in rows}) > 1
     groups = {}
     for r in rows:
-        groups.setdefault((r["method"], r["order"]), []).append(r)
-    for xkey, name, xlabel in (("h", "error_vs_h.png", "h (m)"), ("wall_s", "error_vs_time.png", "wall time (s)")):
-        fig, axes = plt.subplots(1, len(fields), figsize=(4.2 * len(fields), 3.6), squeeze=False)
-        for ax, f in zip(axes[0], fields):
-            for (method, order), rs in groups.items():
-                ax.loglog([r[xkey] for r in rs], [r[f"L2_{f}"] for r in rs], "o-", label=f"{method} P{order}")
+        key = (r["method"], r["order"], r["cfl"] if spatial else None)
+        groups.setdefault(key, []).append(r)
+    sweep = ("h", "error_vs_h.png", "h (m)") if spatial else ("cfl", "error_vs_cfl.png", "CFL")
+    for xkey, name, xlabel in (sweep, ("wall_s", "error_vs_time.png", "wall time (s)")):
+        fig, axes = plt.subplots(1, len(columns), figsize=(4.2 * len(columns), 3.6), squeeze=False)
+        for ax, (column, field) in zip(axes[0], columns):
+            for (method, order, cfl), rs in groups.items():
+                label = f"{method} P{order}" + (f" CFL {cfl:g}" if cfl is not None and len(
+                    {r["cfl"] for r in rows}) > 1 else "")
+                ax.loglog([r[xkey] for r in rs], [r[column] for r in rs], "o-", label=label)
             ax.set_xlabel(xlabel)
-            ax.set_ylabel(f"relative L2 error of {f}")
+            ax.set_ylabel("max displacement error (m), WG08" if column == "Linf_u"
+                          else f"relative L2 error of {field}")
             ax.grid(True, which="both", alpha=0.3)
         axes[0][0].legend(fontsize=7)
         fig.tight_layout()

@@ -39,3 +39,23 @@ def test_rates_are_computed_between_successive_grids():
 def test_bad_study_input(args, match):
     with pytest.raises(InputError, match=match):
         convergence(*args, progress=False)
+
+
+def test_temporal_study_rates_along_the_time_step_and_unstable_runs_record_error_one():
+    # one grid, several CFL numbers: rates are taken against the mean step; WG08's convention
+    # records a blown-up run as error 1 and the study goes on
+    ok, slow = convergence("standing_wave_2d", ["rk-dgfem/rk2"], [1], [4], fields=["P11"], progress=False,
+                           cfls=[0.1, 0.2])
+    with pytest.warns(UserWarning, match="von Neumann"):          # CFL 2 is far above the limit 0.69
+        stable, blown = convergence("standing_wave_2d", ["dgmpm"], [1], [4], fields=["P11"], progress=False,
+                                    cfls=[0.2, 2.0], overrides=["run.t_end=2e-3"])
+    assert ok["status"] == slow["status"] == stable["status"] == "ok" and blown["status"] == "unstable"
+    assert blown["L2_P11"] == 1.0 and np.isnan(blown["rate_P11"])
+    assert np.isclose(slow["dt"], 2 * ok["dt"], rtol=0.05)
+    expected = np.log(slow["L2_P11"] / ok["L2_P11"]) / np.log(slow["dt"] / ok["dt"])
+    assert np.isclose(slow["rate_P11"], expected)
+
+
+def test_wg08_measure_needs_a_displacement():
+    with pytest.raises(InputError, match="wg08"):
+        convergence("standing_wave_2d", ["dgmpm"], [1], [4], progress=False, measure="wg08")
