@@ -23,7 +23,7 @@ from .errors import InputError
 from .faces import interior_faces
 from .limiter import SlopeLimiter
 from .particles import Particles
-from .scheme import GodunovScheme, GridState, ParticleState
+from .scheme import GodunovScheme, GridState, ParticleState, advance_positions
 
 INTEGRATORS = ("rk2", "rk4")
 
@@ -187,7 +187,8 @@ class DGFEM(GodunovScheme):
         U = self.B @ dofs
         Q = self.point_state(U, self.gauss.cell, self.gauss.rho0)
         v = Q[:, self.d * self.d:]
-        new = ParticleState(state.t + dt, U, Q, state.x + dt * v, state.step + 1, dofs=dofs)
+        new = ParticleState(state.t + dt, U, Q, advance_positions(state, v, dt, self.d), state.step + 1,
+                            dofs=dofs)
         self.check(new)
         return new
 
