@@ -4,11 +4,12 @@
 >>> steel = make_material("svk", E=200e9, nu=0.3, rho=7800.0)
 """
 
-from dataclasses import fields
+from dataclasses import MISSING, fields
 
 from skdgmpm.errors import InputError
 
 from .base import Material
+from .gavrilyuk import Gavrilyuk
 from .linear_elastic import LinearElastic
 from .neo_hookean import NeoHookean
 from .saint_venant_kirchhoff import SaintVenantKirchhoff
@@ -17,10 +18,11 @@ LAWS = {
     "linear_elastic": LinearElastic,
     "saint_venant_kirchhoff": SaintVenantKirchhoff,
     "neo_hookean": NeoHookean,
+    "gavrilyuk": Gavrilyuk,
 }
 _ALIASES = {"svk": "saint_venant_kirchhoff"}
 
-__all__ = ["LAWS", "LinearElastic", "Material", "NeoHookean", "SaintVenantKirchhoff",
+__all__ = ["LAWS", "Gavrilyuk", "LinearElastic", "Material", "NeoHookean", "SaintVenantKirchhoff",
            "make_material"]
 
 
@@ -32,7 +34,8 @@ def make_material(law, **params):
     law : str
         A key of `LAWS` or an alias (``"svk"``).
     **params
-        The law's parameters (``E``, ``nu``, ``rho`` for the elastic laws).
+        The law's parameters (``E``, ``nu``, ``rho`` for the elastic laws, plus ``a`` for
+        ``gavrilyuk``, default -1).
 
     Returns
     -------
@@ -52,7 +55,8 @@ def make_material(law, **params):
         if key not in names:
             raise InputError(f"material: parameter {key!r} is unknown for law {law!r}; "
                              f"expected {', '.join(names)}")
-    missing = [name for name in names if name not in params]
+    required = [f.name for f in fields(cls) if f.init and f.default is MISSING]
+    missing = [name for name in required if name not in params]
     if missing:
         raise InputError(f"material: law {law!r} is missing parameter(s) {', '.join(missing)}")
     return cls(**params)

@@ -6,12 +6,15 @@ import numpy as np
 import pytest
 
 from skdgmpm.errors import InputError
-from skdgmpm.materials import (LAWS, LinearElastic, Material, NeoHookean, SaintVenantKirchhoff,
+import functools
+
+from skdgmpm.materials import (LAWS, Gavrilyuk, LinearElastic, Material, NeoHookean, SaintVenantKirchhoff,
                                make_material)
 
 PARAMS = dict(E=2.0, nu=0.3, rho=1.5)
-ALL = [LinearElastic, SaintVenantKirchhoff, NeoHookean]
-HYPERELASTIC = [SaintVenantKirchhoff, NeoHookean]
+GAVRILYUK = [functools.partial(Gavrilyuk, a=a) for a in (-1.0, 0.0, 0.5)]   # the whole range of a
+ALL = [LinearElastic, SaintVenantKirchhoff, NeoHookean, *GAVRILYUK]
+HYPERELASTIC = [SaintVenantKirchhoff, NeoHookean, *GAVRILYUK]
 I3 = np.eye(3)
 
 
@@ -182,7 +185,7 @@ def test_bad_parameters_raise_input_error(name, value):
 
 
 def test_make_material_by_name():
-    assert set(LAWS) == {"linear_elastic", "saint_venant_kirchhoff", "neo_hookean"}
+    assert set(LAWS) == {"linear_elastic", "saint_venant_kirchhoff", "neo_hookean", "gavrilyuk"}
     for name, cls in LAWS.items():
         assert make_material(name, **PARAMS) == cls(**PARAMS)
     assert isinstance(make_material("svk", **PARAMS), SaintVenantKirchhoff)
@@ -193,3 +196,27 @@ def test_make_material_by_name():
         make_material("neo_hookean", E=2.0, nu=0.3, density=1.0)
     with pytest.raises(InputError, match="rho"):
         make_material("neo_hookean", E=2.0, nu=0.3)
+
+
+@pytest.mark.parametrize("law", GAVRILYUK, ids=["a=-1", "a=0", "a=0.5"])
+def test_gavrilyuk_small_strain_limit_and_hyperbolicity(law):
+    # shear modulus mu and bulk modulus kappa at F = I for every a (the reason for reading L23's
+    # "I2b - 9" as I1b^2 - 9, see the class docstring); hyperbolic at large random strains
+    mat = law(**PARAMS)
+    assert np.allclose(mat.tangent(I3), isotropic_tensor(mat.lam, mat.mu), atol=1e-12)
+    rng = np.random.default_rng(3)
+    F = I3 + 0.6 * rng.standard_normal((4000, 3, 3))
+    F = F[np.linalg.det(F) > 0.05]
+    N = rng.standard_normal((len(F), 3))
+    assert mat.is_hyperbolic(F, N / np.linalg.norm(N, axis=1)[:, None]).all()
+
+
+def test_gavrilyuk_a_minus_one_is_quadratic_volume_plus_neo_hookean_shear():
+    # closed form of L23 eq 16 + 19
+    mat, F = Gavrilyuk(**PARAMS), random_F(0.3, seed=4)
+    J = np.linalg.det(F)
+    W = 0.5 * mat.bulk * (J - 1) ** 2 + 0.5 * mat.mu * (J ** (-2 / 3) * np.einsum("nia,nia->n", F, F) - 3)
+    assert np.allclose(mat.energy(F), W, rtol=1e-12)
+    assert make_material("gavrilyuk", **PARAMS) == mat
+    with pytest.raises(InputError, match="a = 0.7"):
+        make_material("gavrilyuk", **PARAMS, a=0.7)

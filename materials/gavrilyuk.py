@@ -1,0 +1,85 @@
+"""Quadratic volumetric energy plus the rank-one convex isochoric family of Gavrilyuk et al.
+[L23 eq 13-23]."""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .base import Material, _check_parameter
+
+_I = np.eye(3)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Gavrilyuk(Material):
+    """W = kappa/2 (J - 1)^2 + mu/4 [-2a (I1b - 3) + (1 + a)/3 (I1b^2 - 9)] [L23 eq 16-17].
+
+    I1b = J^(-2/3) tr(F^T F); kappa = E / (3 (1 - 2 nu)), mu = E / (2 (1 + nu)); a = -1
+    (default) is the neo-Hookean shear energy mu/2 (I1b - 3) of L23 eq 19.
+
+    L23 eq 18 defines the second invariant as I2b = (tr(Cb)^2 - tr(Cb^2))/2, which equals 3, not
+    9, at F = I; with it the small-strain shear modulus is mu (1 - 5a)/6 (negative for a > 1/5,
+    so not hyperbolic on the range a in [-1, 1/2] claimed next to it). The value 9 is that of
+    I1b^2, and with I1b^2 the shear modulus is mu for every a: we take that reading (tested:
+    isotropic tangent lam, mu at F = I, hyperbolic on the whole range at large strain). The
+    scenes use a = -1, where the two readings coincide.
+
+    P = kappa (J - 1) H + (w1 + 2 w2 I1b) dI1b/dF with H = J F^-T (cofactor), w1 = -mu a / 2,
+    w2 = mu (1 + a) / 12 and dI1b/dF = J^(-2/3) (2F - 2/3 I1 G), G = F^-T. The tangent
+    differentiates once more (dG_ia/dF_jb = -G_ib G_ja). Like the neo-Hookean law, states with
+    J <= 0 give the values at F = I and `is_hyperbolic` returns False.
+    Shapes as in `skdgmpm.materials.base`.
+    """
+
+    a: float = -1.0
+
+    def __post_init__(self):
+        super().__post_init__()
+        _check_parameter("a", self.a, -1.0 - 1e-12, 0.5 + 1e-12)
+
+    def _kinematics(self, F):
+        F = np.asarray(F, dtype=float)
+        ok = np.linalg.det(F) > 0.0
+        F = np.where(ok[..., None, None], F, _I)
+        J = np.linalg.det(F)
+        G = np.swapaxes(np.linalg.inv(F), -1, -2)
+        I1 = np.einsum("...ia,...ia->...", F, F)
+        I1b = J ** (-2 / 3) * I1
+        dI1b = (J ** (-2 / 3))[..., None, None] * (2 * F - 2 / 3 * I1[..., None, None] * G)
+        return F, J, G, I1, I1b, dI1b, ok
+
+    @property
+    def _weights(self):
+        """Coefficients of I1b and I1b^2 in the isochoric energy."""
+        return -0.5 * self.mu * self.a, self.mu * (1.0 + self.a) / 12.0
+
+    def first_piola(self, F):
+        F, J, G, I1, I1b, dI1b, _ = self._kinematics(F)
+        w1, w2 = self._weights
+        return ((self.bulk * (J - 1.0) * J)[..., None, None] * G
+                + (w1 + 2 * w2 * I1b)[..., None, None] * dI1b)
+
+    def tangent(self, F):
+        F, J, G, I1, I1b, dI1b, _ = self._kinematics(F)
+        w1, w2 = self._weights
+        s = lambda x: x[..., None, None, None, None]           # noqa: E731 (scalar -> 4th order)
+        e = np.einsum
+        GG_x = e("...ib,...ja->...iajb", G, G)                 # G_ib G_ja
+        GG = e("...ia,...jb->...iajb", G, G)                   # G_ia G_jb
+        # volumetric: d(kappa (J - 1) J G) = kappa [(2J - 1) J G_ia G_jb - (J - 1) J G_ib G_ja]
+        vol = self.bulk * (s((2 * J - 1) * J) * GG - s((J - 1) * J) * GG_x)
+        # d2 I1b: derivative of f (2F - 2/3 I1 G) with f = J^(-2/3), df/dF = -2/3 f G
+        d2I1b = s(J ** (-2 / 3)) * (-2 / 3 * (2 * e("...ia,...jb->...iajb", F, G) - 2 / 3 * s(I1) * GG)
+                                    + 2 * e("ij,ab->iajb", _I, _I)
+                                    - 4 / 3 * e("...ia,...jb->...iajb", G, F) + 2 / 3 * s(I1) * GG_x)
+        return (vol + s(w1 + 2 * w2 * I1b) * d2I1b
+                + 2 * w2 * e("...ia,...jb->...iajb", dI1b, dI1b))
+
+    def energy(self, F):
+        F, J, G, I1, I1b, dI1b, ok = self._kinematics(F)
+        w1, w2 = self._weights
+        W = 0.5 * self.bulk * (J - 1.0) ** 2 + w1 * (I1b - 3.0) + w2 * (I1b**2 - 9.0)
+        return np.where(ok, W, np.inf)
+
+    def is_hyperbolic(self, F, N):
+        return super().is_hyperbolic(F, N) & (np.linalg.det(np.asarray(F, dtype=float)) > 0.0)
