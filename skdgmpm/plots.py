@@ -1,6 +1,17 @@
 """Plots a person would rather look at than read (matplotlib, headless-safe)."""
 import numpy as np
 
+from .errors import InputError
+
+#: units of the particle fields, by the name without its indices
+UNITS = {"P": "Pa", "sigma": "Pa", "v": "m/s", "x": "m", "speed": "m/s"}
+
+
+def label(field):
+    """``P11 (Pa)``, ``v1 (m/s)``, ``F11``: the field name with its unit, if it has one."""
+    unit = UNITS.get(field.rstrip("0123456789"))
+    return f"{field} ({unit})" if unit else field
+
 
 def _figure():
     import matplotlib
@@ -46,7 +57,7 @@ def segment_particles(result, start, end, tol=None):
     a, b = np.asarray(start, dtype=float), np.asarray(end, dtype=float)
     length = np.linalg.norm(b - a)
     if a.shape != (X.shape[1],) or b.shape != a.shape or not length > 0:
-        raise ValueError(f"segment {start!r} -> {end!r}: expected two distinct points of dimension {X.shape[1]}")
+        raise InputError(f"segment {start!r} -> {end!r}: expected two distinct points of dimension {X.shape[1]}")
     if tol is None:
         tol = 0.5 * np.median(result.disc.particles.volume) ** (1.0 / X.shape[1])
     s = (X - a) @ (b - a) / length
@@ -81,7 +92,7 @@ def line(result, field="P11", state=None, start=None, end=None, ax=None):
         points = a + np.outer(dist / dist[-1], b - a)
         ax.plot(abscissa(dist), result.exact.fields(points, state.t)[field], "k-", lw=1, label="exact")
     ax.set_xlabel("X1 (m)" if horizontal else f"distance from {tuple(np.round(a, 6))} (m)")
-    ax.set_ylabel(field)
+    ax.set_ylabel(label(field))
     ax.legend(fontsize=8)
     ax.set_title(result.scene.get("title", result.scene.name))
     return ax

@@ -93,13 +93,39 @@ class Result:
             out["errors"] = self.errors
         return out
 
+    def plot(self, field="P11", time=None, grid=True, path=None, **options):
+        """Particles at ``time`` (default: the end) coloured by ``field``, over the grid: a
+        picture shown inline in Jupyter, written to ``path`` (PNG) if given. See `pictures`."""
+        from . import pictures
+        return pictures.particles(self, field, time, grid, path, **options)
+
+    def plot_line(self, field="P11", time=None, start=None, end=None, path=None, ax=None):
+        """``field`` along a segment (default: the bottom line) against the exact solution."""
+        from . import pictures
+        return pictures.line(self, field, time, start, end, path, ax)
+
+    def animate(self, path, field="P11", **options):
+        """The stored frames as a GIF (or MP4) at ``path``; shown inline in Jupyter."""
+        from . import pictures
+        return pictures.animate(self, path, field, **options)
+
     def __repr__(self):
+        """One line: scene, method, steps, time, wall time, status and the headline errors."""
+        st, method = self.stepper, self.summary()["method"]
+        if method != "dgmpm" and hasattr(st, "order"):
+            method += f" P{st.order}"
+        options = [st.integrator] + ([st.transverse] if self.scene.dim > 1 and getattr(st, "transverse", None)
+                                     not in (None, "none") else [])
         err = ""
         if self.errors:
-            err = ", " + ", ".join(f"{k} L1={v['L1_rel']:.2e}" for k, v in self.errors.items())
-        return (f"<Result {self.scene.name} {self.summary()['method']}/{self.stepper.integrator}"
-                f"/{self.stepper.transverse} {self.status}: {self.state.step} steps, "
-                f"t={self.state.t:.4g} s, {self.wall_s:.2f} s{err}>")
+            l2 = {k: v["L2_rel"] for k, v in self.errors.items()}
+            shown = [k for k in ("P11", "v1") if k in l2] or list(l2)[:2]
+            worst = max(l2, key=l2.get)
+            err = "; L2 rel " + ", ".join(f"{k} {l2[k]:.2e}" for k in shown)
+            if l2[worst] > 1.01 * max(l2[k] for k in shown):
+                err += f" (max {worst} {l2[worst]:.2e})"
+        return (f"<Result {self.scene.name}: {method} ({', '.join(options)}), {self.status}, "
+                f"{self.state.step} steps to t = {self.state.t:.4g} s in {self.wall_s:.2f} s{err}>")
 
 
 def compute_errors(disc, state, solution):
