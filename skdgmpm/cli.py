@@ -72,6 +72,19 @@ def _cmd_converge(args):
     return 0
 
 
+def _cmd_bench(args):
+    from . import bench
+
+    methods = [m for m in args.methods.split(",") if m] if args.methods != "all" else list(bench.METHODS)
+    sizes = __import__("skdgmpm.study", fromlist=["_int_list"])._int_list(args.sizes, "--sizes")
+    rows = bench.main(methods, sizes, steps=args.steps, warmup=args.warmup, json_path=args.json,
+                      progress=not args.quiet)
+    m = bench.machine()
+    print(f"{m['processor']}, {m['cpus']} CPUs, Python {m['python']}")
+    print(bench.format_table(rows))
+    return 0
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="skdgmpm", description="DGMPM solver for impacts on solids")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -106,6 +119,17 @@ def main(argv=None):
     p.add_argument("--force", action="store_true", help="replace an existing output directory")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_converge)
+
+    p = sub.add_parser("bench", help="benchmark every method on a 2D neo-Hookean impact (set-up, "
+                                     "time per step/cell/dof, memory)")
+    p.add_argument("--methods", default="dgmpm-ctu,dgmpm-dcu,ader-dgmpm-1,ader-dgfem-1,rk-dgfem-1",
+                   help="comma-separated benchmark names, or 'all' (see skdgmpm.bench.METHODS)")
+    p.add_argument("--sizes", default="64,128", help="cells per side")
+    p.add_argument("--steps", type=int, default=5, help="timed steps (median)")
+    p.add_argument("--warmup", type=int, default=2, help="untimed steps first")
+    p.add_argument("--json", default=None, help="also write the rows and the machine to this JSON file")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_bench)
 
     p = sub.add_parser("list", help="list the scenes")
     p.set_defaults(func=_cmd_list)

@@ -1,0 +1,131 @@
+"""Benchmarks: set-up time, wall time per step, per cell, per degree of freedom, particles per
+second and peak memory of every method on a 2D plane-strain neo-Hookean impact.
+
+    skdgmpm bench --sizes 64,128 --methods dgmpm-ctu,ader-dgmpm-1 --steps 5 --json bench.json
+
+Each (method, size) runs in a fresh process, so its peak memory is its own. Step times are the
+median over ``steps`` timed steps after ``warmup`` steps. A degree of freedom is one state vector
+at a grid node (DG) or at a particle (MPM); per-stage times divide by the right-hand sides one
+step evaluates (Euler 1, RK2 2, RK4 4, ADER 1 predictor + corrector). Timings are measurements on
+the machine at hand, never test results.
+"""
+import json
+import multiprocessing
+import os
+import platform
+import resource
+import statistics
+import time
+
+from .errors import InputError
+from .study import L23_LAYOUT
+
+# the plate impact of R18 §7.4 on a square plate: lower quarter of the left face driven at
+# 1000 m/s, neo-Hookean steel; long enough that no run reaches its end time
+SCENE = "plate_impact_neohookean_2d"
+BASE = ["grid.size=[4.0, 4.0]", "run.t_end=1.0"]
+
+METHODS = {
+    "dgmpm-dcu": ['method.name="dgmpm"', 'method.transverse="dcu"', "method.cfl=0.7"],
+    "dgmpm-ctu": ['method.name="dgmpm"', 'method.transverse="ctu"', "method.cfl=1.0"],
+    "mpm-cd-cpgimp": ['method.name="mpm"', 'method.update="cd"', 'method.shape="cpgimp"', "method.cfl=0.4",
+                      "particles.per_cell=2"],
+}
+for _p in (1, 2, 3):
+    METHODS[f"ader-dgmpm-{_p}"] = ['method.name="ader-dgmpm"', f"method.order={_p}", "method.cfl=0.4",
+                                   f"particles.per_cell={L23_LAYOUT[_p]}"]
+    METHODS[f"ader-dgfem-{_p}"] = ['method.name="ader-dgfem"', f"method.order={_p}", "method.cfl=0.4"]
+    METHODS[f"rk-dgfem-{_p}"] = ['method.name="rk-dgfem"', f"method.order={_p}", "method.cfl=0.4",
+                                 f'method.integrator="{"rk2" if _p == 1 else "rk4"}"']
+STAGES = {"euler": 1, "rk2": 2, "rk4": 4}
+
+
+def _measure(method, n, steps, warmup):
+    """One benchmark in this process: returns a row (dict)."""
+    from .build import build
+    from .scene import load_scene
+
+    base_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    scene = load_scene(SCENE, [*BASE, f"grid.cells=[{n}, {n}]", *METHODS[method]])
+    t0 = time.perf_counter()
+    disc = build(scene)
+    setup = time.perf_counter() - t0
+    stepper, state = disc.stepper, disc.initial
+    times = []
+    for k in range(warmup + steps):
+        t0 = time.perf_counter()
+        state = stepper.step(state)
+        if k >= warmup:
+            times.append(time.perf_counter() - t0)
+    step = statistics.median(times)
+    cells = int(stepper.grid.submesh.nelements)
+    dofs = len(disc.particles) if method.startswith("mpm") else int(stepper.n_dofs)
+    stages = STAGES.get(stepper.integrator, 1)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss      # KiB on Linux
+    return {"method": method, "cells": cells, "particles": len(disc.particles), "dofs": dofs,
+            "setup_s": setup, "step_s": step, "setup_in_steps": setup / step,
+            "us_per_cell_step": 1e6 * step / cells, "s_per_dof_step": step / dofs,
+            "s_per_dof_stage": step / dofs / stages, "particles_per_s": len(disc.particles) / step,
+            "peak_MiB": peak / 1024, "peak_over_base_MiB": (peak - base_rss) / 1024,
+            "bytes_per_cell": 1024 * (peak - base_rss) / cells}
+
+
+def _child(queue, *args):
+    try:
+        queue.put(_measure(*args))
+    except BaseException as exc:        # report, never hang the parent
+        queue.put({"error": f"{type(exc).__name__}: {exc}"})
+
+
+def measure(method, n, steps=5, warmup=2):
+    """Run one benchmark in a fresh process (spawned, so its peak memory is its own)."""
+    if method not in METHODS:
+        raise InputError(f"--methods: {method!r} is not a benchmark (known: {', '.join(METHODS)})")
+    ctx = multiprocessing.get_context("spawn")
+    queue = ctx.Queue()
+    proc = ctx.Process(target=_child, args=(queue, method, n, steps, warmup))
+    proc.start()
+    row = queue.get()
+    proc.join()
+    if "error" in row:
+        return {"method": method, "cells": n * n, "error": row["error"]}
+    return row
+
+
+def machine():
+    return {"machine": platform.machine(), "processor": platform.processor() or platform.machine(),
+            "cpus": os.cpu_count(), "python": platform.python_version(),
+            "threads": os.environ.get("OMP_NUM_THREADS", "unset")}
+
+
+def format_table(rows):
+    head = (f"{'method':<16}{'cells':>8}{'setup s':>9}{'ms/step':>10}{'us/cell':>9}{'ns/dof':>8}"
+            f"{'ns/dof/stage':>13}{'particles/s':>12}{'peak MiB':>10}{'setup/step':>11}")
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        if "error" in r:
+            lines.append(f"{r['method']:<16}{r['cells']:>8}  failed: {r['error']}")
+            continue
+        lines.append(f"{r['method']:<16}{r['cells']:>8}{r['setup_s']:>9.2f}{1e3 * r['step_s']:>10.2f}"
+                     f"{r['us_per_cell_step']:>9.2f}{1e9 * r['s_per_dof_step']:>8.0f}"
+                     f"{1e9 * r['s_per_dof_stage']:>13.0f}{r['particles_per_s']:>12.3g}"
+                     f"{r['peak_MiB']:>10.0f}{r['setup_in_steps']:>11.1f}")
+    return "\n".join(lines)
+
+
+def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True):
+    """Run every (method, size); print the table; write JSON if asked. Returns the rows."""
+    from .run import progress_bar
+
+    rows = []
+    bar = progress_bar(progress, len(methods) * len(sizes), unit="run")
+    for method in methods:
+        for n in sizes:
+            bar.set_description(f"{method} {n}x{n}")
+            rows.append(measure(method, n, steps, warmup))
+            bar.update()
+    bar.close()
+    if json_path is not None:
+        with open(json_path, "w") as fh:
+            json.dump({"machine": machine(), "steps": steps, "warmup": warmup, "rows": rows}, fh, indent=1)
+    return rows

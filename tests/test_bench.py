@@ -1,0 +1,22 @@
+"""`skdgmpm bench` runs end to end at tiny size (timings themselves are never asserted)."""
+import json
+
+from skdgmpm import bench
+from skdgmpm.cli import main
+
+
+def test_bench_command_prints_table_and_writes_json(tmp_path, capsys):
+    path = tmp_path / "bench.json"
+    assert main(["bench", "--sizes", "8", "--methods", "dgmpm-ctu,rk-dgfem-1", "--steps", "2", "--warmup", "1",
+                 "--json", str(path), "--quiet"]) == 0
+    text = capsys.readouterr().out
+    assert "dgmpm-ctu" in text and "rk-dgfem-1" in text and "failed" not in text
+    data = json.load(open(path))
+    assert data["machine"]["cpus"] >= 1 and len(data["rows"]) == 2
+    row = data["rows"][0]
+    assert row["cells"] == 64 and row["dofs"] == 4 * 64 and row["step_s"] > 0 and row["peak_MiB"] > 0
+
+
+def test_unknown_benchmark_is_a_clear_error():
+    assert main(["bench", "--methods", "dgmpm-xyz", "--sizes", "8", "--quiet"]) == 2
+    assert "ader-dgmpm-1" in ", ".join(bench.METHODS)
