@@ -11,6 +11,8 @@ from .ader import ADERDGFEM
 from .ader_dgmpm import ADERDGMPM
 from .dgfem import DGFEM, INTEGRATORS
 from .dgmpm import DGMPM
+from .gimp import SHAPES
+from .mpm import MPM, UPDATES
 from .exact import INITIAL
 from .scene import exact_solution
 from .scheme import cell_values
@@ -143,7 +145,8 @@ def build(scene):
         raise InputError(f"{scene.where('method.cfl')} = {cfl!r} must be in (0, 2]")
     name = method.get("name", "dgmpm")
     integrators = {"dgmpm": ("euler", "rk2"), "rk-dgfem": INTEGRATORS}.get(name)
-    for key, choices in (("integrator", integrators), ("transverse", ("dcu", "ctu"))):
+    mpm_options = (("update", tuple(UPDATES)), ("shape", SHAPES)) if name == "mpm" else ()
+    for key, choices in (("integrator", integrators), ("transverse", ("dcu", "ctu")), *mpm_options):
         # ADER methods are their own time integrator: a scene's integrator key is ignored
         if choices is not None and key in method and method[key] not in choices:
             raise InputError(f"{scene.where(f'method.{key}')} = {method[key]!r}: expected one of "
@@ -154,6 +157,9 @@ def build(scene):
             raise InputError(f"{scene.where('method.order')} = {method['order']!r}: dgmpm is first order")
         stepper = DGMPM(grid, particles, mats, bcs, cfl=cfl, integrator=method.get("integrator", "euler"),
                         transverse=method.get("transverse", "dcu"))
+    elif name == "mpm":              # the whole background grid; integrator/transverse keys are ignored
+        stepper = MPM(grid, particles, mats, bcs, cfl=cfl, update=method.get("update", "usl"),
+                      shape=method.get("shape", "cpgimp"))
     else:
         order = method.get("order", 1)
         if not 1 <= order <= 5:

@@ -30,11 +30,11 @@ SCHEMA = {
     "boundaries": None,
     "bc": None,
     "method": {"name": str, "integrator": str, "transverse": str, "cfl": NUMBER, "order": int,
-               "mls_order": int, "backmap": str, "limiter": str},
+               "mls_order": int, "backmap": str, "limiter": str, "update": str, "shape": str},
     "run": {"t_end": NUMBER, "frames": int},
     "exact": None,
 }
-METHODS = ("dgmpm", "rk-dgfem", "ader-dgfem", "ader-dgmpm")
+METHODS = ("dgmpm", "rk-dgfem", "ader-dgfem", "ader-dgmpm", "mpm")
 
 
 def _where(source, key):

@@ -1,0 +1,293 @@
+"""Updated-Lagrangian MPM / GIMP [WG08], the baseline DGMPM is compared with [R18 §7.1].
+
+Particles carry mass m_p = rho0 V0_p, F, P and v and move through the whole background grid
+(METHOD §8). One step is a short list of named stages; an update variant is the order of those
+stages (cb-geo style):
+
+    shape_functions -> project -> impose_velocity -> [strain_stress (USF)] -> grid_forces
+    -> grid_update -> particle_update -> [reproject -> impose_velocity (UVF)] -> [strain_stress]
+
+* USF: stress from the projected velocity before the momentum update;
+* USL: stress from the updated grid velocity after it;
+* CD: USL with velocities at half steps (the first step's grid acceleration is halved);
+* UVF: CD with the updated particle velocities projected again before the strain update.
+
+Boundary conditions: imposed velocity components fix the grid's boundary nodes (velocity and
+acceleration); tractions are carried by the particles next to the loaded facets, so the load
+follows the material as it moves away from the grid's edge. A particle leaving the grid stops the
+run (InstabilityError naming it).
+
+The state is the `ParticleState` of the Godunov schemes (U = [F, rho0 v], Q = [P, v], x), so the
+checks, energy, outputs and run driver are shared.
+"""
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import system
+from .bcs import Mixed, NormalVelocity, Transmissive
+from .errors import InputError
+from .gimp import SHAPES, Lattice, half_lengths, shape_functions
+from .scheme import GodunovScheme, ParticleState
+
+
+@dataclass(frozen=True)
+class Update:
+    """An MPM update variant: named stages in order; ``half_first_step`` starts the centred
+    difference (v^{1/2} = v^0 + dt/2 a^0)."""
+
+    name: str
+    stages: tuple
+    half_first_step: bool = False
+
+
+_START = ("shape_functions", "project", "impose_velocity")
+_MOMENTUM = ("grid_forces", "grid_update", "particle_update")
+USF = Update("usf", _START + ("strain_stress",) + _MOMENTUM)
+USL = Update("usl", _START + _MOMENTUM + ("strain_stress",))
+CD = Update("cd", USL.stages, half_first_step=True)
+UVF = Update("uvf", _START + _MOMENTUM + ("reproject", "impose_velocity", "strain_stress"), half_first_step=True)
+UPDATES = {u.name: u for u in (USF, USL, CD, UVF)}
+
+
+@dataclass
+class StepData:
+    """What the stages of one step read and write: particle arrays (n, ...) and nodal arrays
+    (n_nodes, ...)."""
+
+    t: float
+    dt: float
+    step: int
+    F: np.ndarray                  # (n, d, d)
+    P: np.ndarray                  # (n, d, d)
+    v: np.ndarray                  # (n, d) particle velocities
+    x: np.ndarray                  # (n, d) current positions
+    shape: object = None           # ShapeFunctions
+    mass: np.ndarray = None        # (n_nodes,)
+    filled: np.ndarray = None      # (n_nodes,) bool, nodes with mass
+    v_grid: np.ndarray = None      # (n_nodes, d) the grid velocity of the latest stage
+    force: np.ndarray = None       # (n_nodes, d) internal + external
+    external: np.ndarray = None    # (n_nodes, d) external only
+    a: np.ndarray = None           # (n_nodes, d)
+    work: float = 0.0              # work of the external forces and constraints in the step (J)
+
+
+@dataclass
+class MPM(GodunovScheme):
+    """Explicit MPM / GIMP stepper on the whole background grid.
+
+    Parameters
+    ----------
+    grid : Grid (``grid.mesh`` is the background; uniform and axis-aligned)
+    particles : Particles; materials : MaterialSet
+    bcs : list of (boundary name of ``grid.mesh``, BoundaryCondition); later entries override
+        earlier ones on shared facets. Imposed velocities act on the grid's boundary nodes,
+        tractions on the particles next to the loaded facets; transmissive is not supported.
+    cfl : Courant number, dt = cfl h_min / max_p(c_p + |v_p|)
+    update : "usf" | "usl" | "cd" | "uvf"; shape : "hat" | "ugimp" | "cpgimp"
+    body_force : None or callable b(X, t) -> (n, d) (m/s^2) at reference positions
+    """
+
+    grid: object
+    particles: object
+    materials: object
+    bcs: list
+    cfl: float = 0.5
+    update: str = "usl"
+    shape: str = "cpgimp"
+    body_force: object = None
+    external_work: float = field(default=0.0, init=False)
+
+    def __post_init__(self):
+        if self.update not in UPDATES:
+            raise InputError(f"method.update = {self.update!r}: expected one of {', '.join(UPDATES)}")
+        if self.shape not in SHAPES:
+            raise InputError(f"method.shape = {self.shape!r}: expected one of {', '.join(SHAPES)}")
+        self.variant = UPDATES[self.update]
+        self.d = self.grid.dim
+        self.lattice = Lattice.from_mesh(self.grid.mesh)
+        self.h_min = float(self.lattice.h.min())
+        # half the initial particle spacing per axis: (V_p / V_cell)^(1/d) of a cell's side
+        ratio = self.particles.volume / np.prod(self.lattice.h)
+        self.l0 = 0.5 * ratio[:, None] ** (1.0 / self.d) * self.lattice.h[None, :]
+        self._setup_grid_conditions()
+
+    # the report names used by run.summary
+    @property
+    def integrator(self):
+        return self.update
+
+    @property
+    def transverse(self):
+        return self.shape
+
+    @property
+    def n_dofs_total(self):
+        return self.lattice.n_nodes * self.d
+
+    # ---------------------------------------------------------------- set-up
+    def _setup_grid_conditions(self):
+        """Imposed velocities on the grid's boundary nodes, tractions on the particles next to the
+        loaded facets; a shared facet belongs to the later condition.
+
+        Tractions are nominal (per reference area, t = P N as for the Godunov schemes). They are
+        carried by the particles, not lumped on the edge nodes: the material moves away from a
+        fixed grid edge, whose nodes then hold a vanishing mass (in the elastic bar the edge-node
+        load pumped 16 times the true work into the bar once the end had moved by one cell).
+        """
+        mesh, d = self.grid.mesh, self.d
+        names = mesh.boundaries or {}
+        owner = np.full(mesh.nfacets, -1)
+        for k, (name, bc) in enumerate(self.bcs):
+            if name not in names:
+                raise InputError(f"bc.{name}: no boundary of that name in the background grid, where mpm "
+                                 f"applies its conditions (known: {', '.join(sorted(names))})")
+            if isinstance(bc, Transmissive):
+                raise InputError(f"bc.{name}: kind = 'transmissive' is not supported by mpm")
+            owner[names[name]] = k
+        facets = np.flatnonzero(owner >= 0)
+        nodes = mesh.facets[:, facets]                                  # (n_vertices, nf)
+        lattice_index = np.rint((mesh.p[:, nodes] - self.lattice.origin[:, None, None])
+                                / self.lattice.h[:, None, None])        # (d, n_vertices, nf)
+        top = np.array(self.lattice.shape)[:, None, None] - 1
+        on_low, on_high = np.all(lattice_index == 0, axis=1), np.all(lattice_index == top, axis=1)
+        if not np.all(on_low.any(axis=0) | on_high.any(axis=0)):
+            raise InputError("bc: mpm applies conditions on the edges of the background grid only")
+        axis = np.argmax(on_low | on_high, axis=0)                      # (nf,) normal axis
+        sign = np.where(on_low[axis, np.arange(len(facets))], -1.0, 1.0)
+        self.constraints, self.tractions = [], []
+        self.constrained = np.zeros((self.lattice.n_nodes, d), bool)      # where reactions act
+        for k, (_, bc) in enumerate(self.bcs):
+            sel = owner[facets] == k
+            if not sel.any():
+                continue
+            fnodes = nodes[:, sel].ravel()
+            if isinstance(bc, NormalVelocity):                          # includes symmetry
+                comp = np.broadcast_to(axis[sel], nodes[:, sel].shape).ravel()
+                value = np.broadcast_to(bc.value * sign[sel], nodes[:, sel].shape).ravel()
+                self.constraints.append((fnodes, comp, value, bc.schedule))
+                self.constrained[fnodes, comp] = True
+            elif isinstance(bc, Mixed):
+                for c, ax in enumerate("xyz"[:d]):
+                    if ax in bc.velocity:
+                        self.constraints.append((fnodes, np.full(fnodes.shape, c),
+                                                 np.full(fnodes.shape, bc.velocity[ax]), bc.schedule))
+                        self.constrained[fnodes, c] = True
+                t = np.array([bc.traction.get(ax, 0.0) if ax not in bc.velocity else 0.0 for ax in "xyz"[:d]])
+                if np.any(t != 0):
+                    force = np.zeros((len(self.particles), d))
+                    particle, area = self._surface_particles(facets[sel], axis[sel])
+                    np.add.at(force, particle, area[:, None] * t[None, :])
+                    self.tractions.append((force, bc.schedule))
+            else:
+                raise InputError(f"bc: condition {type(bc).__name__} is not supported by mpm")
+
+    def _surface_particles(self, facets, axis):
+        """Particles of the cells next to boundary ``facets`` (nf,) in the layer nearest to each
+        facet (normal ``axis`` (nf,)), and their shares of the facet's reference measure."""
+        mesh = self.grid.mesh
+        cell = self.grid.active[self.particles.cell]                    # cells of the background grid
+        order = np.argsort(cell, kind="stable")
+        owner_cell = mesh.f2t[0, facets]
+        lo = np.searchsorted(cell[order], owner_cell, side="left")
+        count = np.searchsorted(cell[order], owner_cell, side="right") - lo
+        face = np.repeat(np.arange(len(facets)), count)                 # (facet, particle) pairs
+        particle = order[np.repeat(lo - np.cumsum(count) + count, count) + np.arange(count.sum())]
+        plane = mesh.p[axis, mesh.facets[0, facets]]
+        dist = np.abs(self.particles.X[particle, axis[face]] - plane[face])
+        nearest = np.full(len(facets), np.inf)
+        np.minimum.at(nearest, face, dist)
+        keep = dist <= nearest[face] + 1e-9 * self.h_min
+        face, particle = face[keep], particle[keep]
+        measure = (np.ones(len(facets)) if self.d == 1 else
+                   np.linalg.norm(np.diff(mesh.p[:, mesh.facets[:, facets]], axis=1)[:, 0], axis=0))
+        return particle, (measure / np.bincount(face, minlength=len(facets)).clip(1))[face]
+
+    # ---------------------------------------------------------------- stages
+    def shape_functions(self, s):
+        """S_ip, grad S_ip at the current positions (cpGIMP: l_p from the current F)."""
+        lp = half_lengths(self.shape, self.l0, s.F, self.lattice.h)
+        s.shape = shape_functions(self.lattice, s.x, self.shape, lp, step=s.step + 1, time=s.t)
+
+    def project(self, s):
+        """m_i = sum_p S_ip m_p, v_i = sum_p S_ip m_p v_p / m_i (zero on empty nodes)."""
+        m = self.particles.mass
+        s.mass = s.shape.S.T @ m
+        # every node with mass takes part: grad S ~ sqrt(S) near the edge of a GIMP support, so
+        # dropping nodes of small mass drops finite forces (and momentum conservation)
+        s.filled = s.mass > 0
+        s.v_grid = self._per_mass(s, s.shape.S.T @ (m[:, None] * s.v))
+
+    def impose_velocity(self, s):
+        """Imposed velocity components on the boundary nodes, at mid-step."""
+        t = s.t + 0.5 * s.dt
+        for nodes, comp, value, schedule in self.constraints:
+            s.v_grid[nodes, comp] = value * schedule(t)
+
+    def strain_stress(self, s):
+        """L_p = sum_i v_i (x) grad S_ip, F <- (I + dt L) F, P = P(F)."""
+        L = np.stack([G @ s.v_grid for G in s.shape.grad], axis=2)          # (n, d, d)
+        s.F = s.F + s.dt * L @ s.F
+        s.P = self.materials.stress(s.F, self.particles.material)
+
+    def grid_forces(self, s):
+        """f_int,i = -sum_p sigma_p grad S_ip V_p (sigma V = P F^T V0), plus sum_p S_ip f_p of the
+        body forces and the boundary tractions (at mid-step) carried by the particles."""
+        tau = np.einsum("pia,pja->pij", s.P, s.F) * self.particles.volume[:, None, None]
+        s.force = -sum(G.T @ tau[:, :, k] for k, G in enumerate(s.shape.grad))
+        carried = np.zeros_like(s.v)                   # (n, d) external forces on the particles
+        if self.body_force is not None:
+            carried += self.particles.mass[:, None] * self.body_force(self.particles.X, s.t)
+        for force, schedule in self.tractions:
+            carried += schedule(s.t + 0.5 * s.dt) * force
+        s.external = s.shape.S.T @ carried
+        s.force += s.external
+
+    def grid_update(self, s):
+        """a_i = f_i / m_i, v_i* = v_i + dt a_i with the imposed components, and the work of the
+        external forces and constraint reactions at the mid-step grid velocity."""
+        factor = 0.5 if self.variant.half_first_step and s.step == 0 else 1.0
+        force = factor * s.force
+        v_old = s.v_grid
+        s.v_grid = v_old + s.dt * self._per_mass(s, force)
+        self.impose_velocity(s)
+        s.a = (s.v_grid - v_old) / s.dt
+        reaction = np.where(self.constrained & s.filled[:, None], s.mass[:, None] * s.a - force, 0.0)
+        s.work = s.dt * float(np.sum((factor * s.external + reaction) * 0.5 * (v_old + s.v_grid)))
+
+    def particle_update(self, s):
+        """v_p += dt sum_i S_ip a_i (FLIP), x_p += dt sum_i S_ip v_i*."""
+        s.v = s.v + s.dt * (s.shape.S @ s.a)
+        s.x = s.x + s.dt * (s.shape.S @ s.v_grid)
+
+    def reproject(self, s):
+        """UVF: the updated particle velocities projected again (same S and m_i)."""
+        m = self.particles.mass
+        s.v_grid = self._per_mass(s, s.shape.S.T @ (m[:, None] * s.v))
+
+    @staticmethod
+    def _per_mass(s, nodal):
+        """nodal / m_i on nodes with mass, zero elsewhere."""
+        return np.where(s.filled[:, None], nodal / np.where(s.filled, s.mass, 1.0)[:, None], 0.0)
+
+    # ---------------------------------------------------------------- driver-facing
+    def time_step(self, state, dt_max=np.inf):
+        """dt = cfl h_min / max_p(c_p + |v_p|): waves and particles cross at most cfl cells."""
+        _, v = system.split(state.Q, self.d)
+        return min(self.cfl * self.h_min / np.max(state.speed + np.linalg.norm(v, axis=1)), dt_max)
+
+    def step(self, state, dt_max=np.inf):
+        F, p = system.split(state.U, self.d)
+        P, v = system.split(state.Q, self.d)
+
+        # dt from the state at the start of the step (no retry as in the Godunov schemes: with
+        # |v| in the bound nearly every step would be taken twice)
+        s = StepData(state.t, self.time_step(state, dt_max), state.step, F.copy(), P.copy(), v.copy(),
+                     state.x.copy())
+        for stage in self.variant.stages:
+            getattr(self, stage)(s)
+        new = ParticleState(state.t + s.dt, system.join(s.F, self.particles.rho0[:, None] * s.v),
+                            system.join(s.P, s.v), s.x, state.step + 1)
+        self.check(new)
+        self.external_work += s.work
+        return new
