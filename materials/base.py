@@ -89,6 +89,12 @@ class Material(ABC):
     def energy(self, F):
         """Stored energy density W(F) per reference volume, shape ``(...,)`` (J/m^3); P = dW/dF."""
 
+    def tangent_block(self, F, d):
+        """The ``(..., d, d, d, d)`` block of the tangent at an *embedded* F (identity outside the
+        first d axes), the only part a d-dimensional system uses. Laws may override it with the
+        same formula on d x d arrays (much less work and memory in 1D/2D)."""
+        return self.tangent(F)[..., :d, :d, :d, :d]
+
     # -- derived ------------------------------------------------------------------------------
     def acoustic_tensor(self, F, N):
         """Acoustic tensor ``A[..., i, j] = C[..., i, a, j, b] N[..., a] N[..., b]``, shape

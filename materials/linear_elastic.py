@@ -32,6 +32,11 @@ class LinearElastic(Material):
              + self.mu * (np.einsum("ij,ab->iajb", _I, _I) + np.einsum("ib,aj->iajb", _I, _I)))
         return np.broadcast_to(C, F.shape[:-2] + (3, 3, 3, 3)).copy()
 
+    def tangent_block(self, F, d):
+        # constant: one (d, d, d, d) tensor broadcast (read-only) over the batch
+        C = self.tangent(np.eye(3))[:d, :d, :d, :d]
+        return np.broadcast_to(C, np.shape(F)[:-2] + (d, d, d, d))
+
     def energy(self, F):
         eps = self._strain(F)
         tr = np.trace(eps, axis1=-2, axis2=-1)

@@ -45,6 +45,17 @@ class NeoHookean(Material):
                 + c * np.einsum("...ib,...ja->...iajb", G, G)
                 + self.lam * np.einsum("...ia,...jb->...iajb", G, G))
 
+    def tangent_block(self, F, d):
+        # an embedded F is block diagonal (F33 = 1), so is G = F^-T: the d-block of C only
+        # involves the d-block of G
+        _, G, lnJ, _ = self._kinematics(F)
+        G = G[..., :d, :d]
+        c = (self.mu - self.lam * lnJ)[..., None, None, None, None]
+        Id = np.eye(d)
+        return (self.mu * np.einsum("ij,ab->iajb", Id, Id)
+                + c * np.einsum("...ib,...ja->...iajb", G, G)
+                + self.lam * np.einsum("...ia,...jb->...iajb", G, G))
+
     def energy(self, F):
         Fs, _, lnJ, ok = self._kinematics(F)
         W = (0.5 * self.mu * (np.einsum("...ia,...ia->...", Fs, Fs) - 3.0)

@@ -41,6 +41,18 @@ class SaintVenantKirchhoff(Material):
                 + self.mu * (np.einsum("...ij,ab->...iajb", B, _I)
                              + np.einsum("...ib,...ja->...iajb", F, F)))
 
+    def tangent_block(self, F, d):
+        # S and B of an embedded F are block diagonal (E33 = 0): the d-block is the same formula
+        # on d x d arrays
+        F = np.asarray(F, dtype=float)
+        S = self._second_piola(F)[..., :d, :d]
+        B = (F @ np.swapaxes(F, -1, -2))[..., :d, :d]
+        F, Id = F[..., :d, :d], np.eye(d)
+        return (np.einsum("ij,...ab->...iajb", Id, S)
+                + self.lam * np.einsum("...ia,...jb->...iajb", F, F)
+                + self.mu * (np.einsum("...ij,ab->...iajb", B, Id)
+                             + np.einsum("...ib,...ja->...iajb", F, F)))
+
     def energy(self, F):
         E = self._green_lagrange(np.asarray(F, dtype=float))
         tr = np.trace(E, axis1=-2, axis2=-1)

@@ -14,6 +14,8 @@ class MaterialSet:
 
     def _apply(self, method, F, index, shape, d, *args):
         F3 = embed(F)
+        if len(self.materials) == 1:                 # no masks, no copies
+            return getattr(self.materials[0], method)(F3, *args)[(slice(None),) + (slice(0, d),) * len(shape)]
         out = np.empty((len(F),) + shape)
         for k, mat in enumerate(self.materials):
             sel = index == k
@@ -29,7 +31,7 @@ class MaterialSet:
     def tangent(self, F, index):
         """C = dP/dF restricted to the d-dimensional system: (n, d, d, d, d)."""
         d = F.shape[1]
-        return self._apply("tangent", F, index, (d, d, d, d), d)
+        return self._apply("tangent_block", F, index, (d, d, d, d), d, d)
 
     def energy(self, F, index):
         """Stored energy density per reference volume (n,)."""

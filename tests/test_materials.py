@@ -220,3 +220,14 @@ def test_gavrilyuk_a_minus_one_is_quadratic_volume_plus_neo_hookean_shear():
     assert make_material("gavrilyuk", **PARAMS) == mat
     with pytest.raises(InputError, match="a = 0.7"):
         make_material("gavrilyuk", **PARAMS, a=0.7)
+
+
+@pytest.mark.parametrize("law", ALL)
+@pytest.mark.parametrize("d", [1, 2, 3])
+def test_tangent_block_is_the_block_of_the_3d_tangent(law, d):
+    # the d-dimensional systems use only this block; laws may compute it on d x d arrays
+    mat, F = law(**PARAMS), random_F(0.3, seed=5)
+    F3 = np.broadcast_to(I3, F.shape).copy()
+    F3[:, :d, :d] = F[:, :d, :d]
+    F3 = F3[np.linalg.det(F3) > 0.1]
+    assert np.allclose(mat.tangent_block(F3, d), mat.tangent(F3)[:, :d, :d, :d, :d], rtol=1e-13, atol=1e-13)
