@@ -17,6 +17,7 @@ The gradient is taken at fixed l_p: it is the domain average (1 / V_p) int chi_p
 The nodes are those of the scikit-fem mesh (``mesh.p``); the matrices are scipy CSR,
 (n_particles, n_nodes).
 """
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -161,7 +162,7 @@ def shape_functions(lattice, x, kind, lp=None, step=None, time=None):
     indptr = np.arange(0, n * m + 1, m)
 
     def csr(factors):                               # m^d entries per row, in the order of cols
-        values = np.prod(np.broadcast_arrays(*factors), axis=0)
+        values = functools.reduce(np.multiply, factors)
         return sp.csr_matrix((values.ravel(), cols.ravel(), indptr), shape=(n, lattice.n_nodes))
 
     return ShapeFunctions(csr(w), [csr([dw[j] if j == k else w[j] for j in range(d)]) for k in range(d)])
