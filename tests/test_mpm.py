@@ -105,7 +105,7 @@ def test_elastic_bar_front_and_plateau(update, cfl):
 def test_dgmpm_is_far_more_accurate_than_mpm_on_the_bar():
     """R18 §7.1 side by side, 1 ppc, 100 DGMPM steps (front at 4 m). Measured L1_rel(P11):
     DGMPM CFL 1: 2.5e-14; MPM-USF CFL 1: 7.95e-2; MPM-USL CFL 0.5: 7.21e-2 (MPM-USL is unstable
-    at CFL 1: particle 0 leaves the grid after 15 steps)."""
+    at CFL 1: particle 0 leaves the grid within 16 steps)."""
     dgmpm = bar(100).errors["P11"]["L1_rel"]
     usf = bar(100, 'method.name="mpm"', 'method.update="usf"').errors["P11"]["L1_rel"]
     usl = bar(100, 'method.name="mpm"', 'method.update="usl"', "method.cfl=0.5").errors["P11"]["L1_rel"]
