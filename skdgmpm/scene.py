@@ -33,6 +33,7 @@ SCHEMA = {
                "mls_order": int, "backmap": str, "limiter": str, "update": str, "shape": str},
     "run": {"t_end": NUMBER, "frames": int},
     "exact": None,
+    "figures": {"times": list, "fields": list},     # paper times and fields of `skdgmpm compare-figures`
 }
 METHODS = ("dgmpm", "rk-dgfem", "ader-dgfem", "ader-dgmpm", "mpm")
 
