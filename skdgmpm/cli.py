@@ -49,26 +49,59 @@ def _cmd_stability(args):
     return 0
 
 
-def _cmd_converge(args):
+def _study(args, default_out):
+    """Run the convergence study of ``converge``/``compare``; returns (rows, out folder)."""
     from pathlib import Path
 
     from . import study
+    from .executor import make_executor
 
-    out = Path(args.out if args.out is not None else f"runs/converge_{_stem(args.scene)}")
+    out = Path(args.out if args.out is not None else default_out)
     if out.exists() and any(out.iterdir()) and not args.force:
         raise InputError(f"--out {out}: directory exists and is not empty (use --force to replace it)")
-    rows = study.convergence(args.scene, [m for m in args.methods.split(",") if m],
-                             study._int_list(args.orders, "--orders"), study._int_list(args.cells, "--cells"),
-                             overrides=args.set, fields=[f for f in (args.fields or "").split(",") if f] or None,
-                             progress=not args.quiet, reference=args.reference,
-                             cfls=study._float_list(args.cfls, "--cfls") if args.cfls else None,
-                             measure=args.measure)
-    print(study.format_table(rows))
+    pool = make_executor(args.workers, dask=args.dask)
+    try:
+        rows = study.convergence(args.scene, [m for m in args.methods.split(",") if m],
+                                 study._int_list(args.orders, "--orders"), study._int_list(args.cells, "--cells"),
+                                 overrides=args.set, fields=[f for f in (args.fields or "").split(",") if f] or None,
+                                 progress=not args.quiet, reference=args.reference,
+                                 cfls=study._float_list(args.cfls, "--cfls") if args.cfls else None,
+                                 measure=args.measure, executor=pool)
+    finally:
+        pool.shutdown()
     out.mkdir(parents=True, exist_ok=True)
+    return rows, out
+
+
+def _cmd_converge(args):
+    from . import study
+
+    rows, out = _study(args, f"runs/converge_{_stem(args.scene)}")
+    print(study.format_table(rows))
     study.write_csv(out / "convergence.csv", rows)
     study.plot(rows, out)
     sweep = "h" if len({r["cells"] for r in rows}) > 1 else "cfl"
     print(f"-> {out}/convergence.csv, error_vs_{sweep}.png, error_vs_time.png")
+    return 0
+
+
+def _cmd_compare(args):
+    from . import study
+
+    rows, out = _study(args, f"runs/compare_{_stem(args.scene)}")
+    print(study.format_table(rows))
+    column = next((c for c, name in study.error_keys(rows[0]) if name == args.field), None) \
+        if args.field else study.error_keys(rows[0])[0][0]
+    if column is None:
+        raise InputError(f"--field {args.field!r} is not in the study "
+                         f"(known: {', '.join(n for _, n in study.error_keys(rows[0]))})")
+    study.write_csv(out / "compare.csv", rows)
+    study.plot_work_precision(rows, column, out / "work_precision.png",
+                              title=f"{_stem(args.scene)}: {column.replace('_', ' ')} against wall time")
+    print(f"\nfastest to each accuracy ({column.replace('_', ' ')}):")
+    for target, label, seconds in study.winners(rows, column):
+        print(f"  {target:9.1e}  {label:<22} {seconds:8.2f} s")
+    print(f"-> {out}/compare.csv, work_precision.png")
     return 0
 
 
@@ -98,27 +131,38 @@ def main(argv=None):
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_run)
 
-    p = sub.add_parser("converge", help="convergence study against a scene's exact solution")
-    p.add_argument("scene", help="scene with an exact solution, e.g. standing_wave_2d")
-    p.add_argument("--methods", default="dgmpm,rk-dgfem",
-                   help="comma-separated: dgmpm, rk-dgfem, ader-dgfem, ader-dgmpm, mpm; method/integrator "
-                        "picks a time integrator (rk-dgfem/rk2), mpm/UPDATE-SHAPE an MPM variant (mpm/cd-cpgimp)")
-    p.add_argument("--orders", default="1,2,3", help="orders P of the high-order methods")
-    p.add_argument("--cells", default="4,8,16", help="cells per direction")
-    p.add_argument("--cfls", default=None,
-                   help="CFL numbers (default: the scene's); one grid and several CFLs is a temporal study")
-    p.add_argument("--measure", default="l2", choices=("l2", "wg08"),
-                   help="l2: relative L2 error of each field at the end; wg08: max displacement error "
-                        "over all particles and steps (needs a manufactured solution)")
-    p.add_argument("--fields", default=None, help="fields to report (default: all of the exact solution)")
-    p.add_argument("--reference", default=None, metavar="METHOD:P:CELLS",
-                   help="fine DGFEM run to compare with when the scene has no exact solution, "
-                        "e.g. rk-dgfem/rk4:3:40")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene key")
-    p.add_argument("--out", default=None, help="output directory (default runs/converge_SCENE)")
-    p.add_argument("--force", action="store_true", help="replace an existing output directory")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=_cmd_converge)
+    for command, help_text, default_methods in (
+            ("converge", "convergence study against a scene's exact solution", "dgmpm,rk-dgfem"),
+            ("compare", "speed against error: work-precision diagram of methods and orders",
+             "dgmpm,rk-dgfem,ader-dgfem,ader-dgmpm")):
+        p = sub.add_parser(command, help=help_text)
+        p.add_argument("scene", help="scene with an exact solution, e.g. standing_wave_2d")
+        p.add_argument("--methods", default=default_methods,
+                       help="comma-separated: dgmpm, rk-dgfem, ader-dgfem, ader-dgmpm, mpm; method/integrator "
+                            "picks a time integrator (rk-dgfem/rk2), mpm/UPDATE-SHAPE an MPM variant (mpm/cd-cpgimp)")
+        p.add_argument("--orders", default="1,2,3", help="orders P of the high-order methods")
+        p.add_argument("--cells", default="4,8,16", help="cells per direction")
+        p.add_argument("--cfls", default=None,
+                       help="CFL numbers (default: the scene's); one grid and several CFLs is a temporal study")
+        p.add_argument("--measure", default="l2", choices=("l2", "wg08"),
+                       help="l2: relative L2 error of each field at the end; wg08: max displacement error "
+                            "over all particles and steps (needs a manufactured solution)")
+        p.add_argument("--fields", default=None, help="fields to report (default: all of the exact solution)")
+        if command == "compare":
+            p.add_argument("--field", default=None, help="field of the diagram (default: the first reported)")
+        p.add_argument("--reference", default=None, metavar="METHOD:P:CELLS",
+                       help="fine DGFEM run to compare with when the scene has no exact solution, "
+                            "e.g. rk-dgfem/rk4:3:40")
+        p.add_argument("--workers", type=int, default=None,
+                       help="local processes running the study (default: all cores; 1 runs here, "
+                            "one run at a time: cleanest wall times)")
+        p.add_argument("--dask", default=None, metavar="tcp://HOST:PORT",
+                       help="run the study on this Dask distributed scheduler instead")
+        p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene key")
+        p.add_argument("--out", default=None, help=f"output directory (default runs/{command}_SCENE)")
+        p.add_argument("--force", action="store_true", help="replace an existing output directory")
+        p.add_argument("--quiet", action="store_true", help="no progress bar")
+        p.set_defaults(func=_cmd_converge if command == "converge" else _cmd_compare)
 
     p = sub.add_parser("bench", help="benchmark every method on a 2D neo-Hookean impact (set-up, "
                                      "time per step/cell/dof, memory)")

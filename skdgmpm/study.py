@@ -81,8 +81,47 @@ class DisplacementError:
         self.value = max(self.value, float(np.max(np.linalg.norm(state.x - self.X - u, axis=1))))
 
 
+def study_run(base, overrides, measure="l2", keep_fields=False):
+    """One run of a study (in a worker process): summary, errors and, if asked, the fields."""
+    monitor = DisplacementError(exact_solution(base)) if measure == "wg08" else None
+    result = run(base, overrides, progress=False, on_step=monitor)
+    out = {"summary": result.summary(), "errors": result.errors, "wg08": monitor and monitor.value}
+    if keep_fields:
+        out.update(fields=result.fields(), X=result.X, volume=result.disc.particles.volume, t=result.state.t)
+    return out
+
+
+def _map(executor, tasks, progress, labels):
+    """Submit every task; results in task order, progress as they finish."""
+    from concurrent.futures import as_completed
+
+    from .executor import make_executor
+
+    own = executor is None
+    pool = make_executor(1) if own else executor
+    bar = progress_bar(progress, len(tasks), unit="run")
+    try:
+        results, pending = [None] * len(tasks), {}
+        for k, (task, label) in enumerate(zip(tasks, labels)):
+            bar.set_description(label)
+            future = pool.submit(study_run, *task)
+            if future.done():                      # a serial executor ran it already
+                results[k] = future.result()
+                bar.update()
+            else:
+                pending[future] = k
+        for future in as_completed(pending):
+            results[pending[future]] = future.result()
+            bar.update()
+        return results
+    finally:
+        bar.close()
+        if own:
+            pool.shutdown()
+
+
 def convergence(scene_name, methods, orders, cells, overrides=(), fields=None, progress=True,
-                reference=None, cfls=None, measure="l2"):
+                reference=None, cfls=None, measure="l2", executor=None):
     """Run every (method, order, grid, CFL) and return one row per run.
 
     Rows: method, order, cells, h, cfl, dt (mean step), dofs, steps, wall_s, status, and the
@@ -96,6 +135,10 @@ def convergence(scene_name, methods, orders, cells, overrides=(), fields=None, p
     "method/integrator:P:cells" (a fine DGFEM run, L2 only) for scenes without one. A run that
     goes unstable records error 1 (WG08's convention) and the study goes on. ADER-DGMPM runs use
     (P+1)^d particles per cell at the L23 §5.1 parent coordinates.
+
+    The runs go through ``executor`` (a `concurrent.futures.Executor`, e.g. from
+    `skdgmpm.executor.make_executor`; None runs them here one after the other). Wall times of
+    runs that share a machine include the competition for its cores.
     """
     if measure not in MEASURES:
         raise InputError(f"--measure {measure!r}: expected one of {', '.join(MEASURES)}")
@@ -131,33 +174,29 @@ def convergence(scene_name, methods, orders, cells, overrides=(), fields=None, p
     cfl_list = cfls or [float(scene_method.get("cfl", 1.0))]
     runs = [(v, p, n, c) for v in variants for p in ([1] if v.first_order else orders)
             for c in cfl_list for n in cells]
-    bar = progress_bar(progress, len(runs), unit="run")
-    rows = []
     size = base.get("grid.size") or [base.get("grid.length")]
+    tasks = []
     for v, p, n, c in runs:
-        bar.set_description(f"{v.label} P{p} {n} cells CFL {c:g}")
         grid = f"grid.cells=[{n}, {n}]" if base.dim == 2 else f"grid.cells={n}"
         layout = [f"particles.per_cell={L23_LAYOUT[p]}"] if v.name == "ader-dgmpm" and p in L23_LAYOUT else []
-        monitor = DisplacementError(exact_solution(base)) if measure == "wg08" else None
-        result = run(base, [*v.overrides(p), grid, f"method.cfl={c}", *layout], progress=False,
-                     on_step=monitor)
-        summary = result.summary()
+        tasks.append((base, [*v.overrides(p), grid, f"method.cfl={c}", *layout], measure, ref is not None))
+    outcomes = _map(executor, tasks, progress, [f"{v.label} P{p} {n} cells CFL {c:g}" for v, p, n, c in runs])
+    rows = []
+    for (v, p, n, c), out in zip(runs, outcomes):
+        summary, ok = out["summary"], out["summary"]["status"] == "ok"
         row = {"method": v.label, "order": p, "cells": n, "h": float(size[0]) / n, "cfl": c,
                "dt": summary["t_final"] / max(summary["steps"], 1), "dofs": summary["dofs"],
-               "steps": summary["steps"], "wall_s": summary["wall_s"], "status": result.status}
+               "steps": summary["steps"], "wall_s": summary["wall_s"], "status": summary["status"]}
         if measure == "wg08":
-            row["Linf_u"] = monitor.value if result.status == "ok" else 1.0
+            row["Linf_u"] = out["wg08"] if ok else 1.0
         else:
-            errors = (result.errors if ref is None
-                      else reference_errors(result, ref, fields or ("eps11", "P11", "v1")))
+            errors = out["errors"] if ref is None else reference_errors(out, ref, fields or ("eps11", "P11", "v1"))
             for name in fields or errors:
                 if name not in errors:
                     raise InputError(f"--fields: {name!r} is not a field of the exact solution "
                                      f"(known: {', '.join(errors)})")
-                row[f"L2_{name}"] = errors[name]["L2_rel"] if result.status == "ok" else 1.0
+                row[f"L2_{name}"] = errors[name]["L2_rel"] if ok else 1.0
         rows.append(row)
-        bar.update()
-    bar.close()
     _rates(rows, along="h" if len(cells) > 1 else "dt")
     return rows
 
@@ -281,9 +320,74 @@ class GridReference:
         return output.particle_fields(_View, ParticleState(t, U, Q, np.asarray(X)))
 
 
-def reference_errors(result, reference, fields):
+def reference_errors(out, reference, fields):
+    """Relative errors of a study run's fields (``study_run(..., keep_fields=True)``) against a
+    `GridReference` at the same points and time."""
     from .exact import error_norms
 
-    values = result.fields()
-    ref = reference.fields(result.X, result.state.t)
-    return {k: error_norms(values[k], ref[k], result.disc.particles.volume) for k in fields}
+    ref = reference.fields(out["X"], out["t"])
+    return {k: error_norms(out["fields"][k], ref[k], out["volume"]) for k in fields}
+
+
+def _curves(rows, column):
+    """(method, order) -> list of (wall_s, error) of the stable runs, sorted by wall time."""
+    curves = {}
+    for r in rows:
+        if r["status"] == "ok":
+            curves.setdefault(f"{r['method']} P{r['order']}", []).append((r["wall_s"], r[column]))
+    return {k: sorted(v) for k, v in curves.items()}
+
+
+def winners(rows, column, per_decade=1):
+    """Which method reaches each accuracy first: for error targets spaced ``per_decade`` per
+    decade between the largest and smallest error of the study, the variant with the smallest
+    wall time to reach it (log-log interpolation along its curve). Returns [(target, label, s)];
+    a target no variant reaches is left out."""
+    curves = _curves(rows, column)
+    errors = [e for c in curves.values() for _, e in c]
+    if not errors:
+        return []
+    hi, lo = np.log10(max(errors)), np.log10(min(errors))
+    targets = 10.0 ** np.arange(np.floor(hi * per_decade) / per_decade, lo - 1e-9, -1.0 / per_decade)
+    out = []
+    for target in targets:
+        best = None
+        for label, curve in curves.items():
+            t = _time_to_reach(curve, target)
+            if t is not None and (best is None or t < best[1]):
+                best = (label, t)
+        if best is not None:
+            out.append((float(f"{target:.6g}"), *best))
+    return out
+
+
+def _time_to_reach(curve, target):
+    """Interpolated wall time at which a (time, error) curve first gets to ``target``."""
+    for k, (t, e) in enumerate(curve):
+        if e <= target:
+            if k == 0:
+                return t
+            (t0, e0) = curve[k - 1]
+            w = np.log(e0 / target) / np.log(e0 / e)
+            return float(np.exp(np.log(t0) + w * np.log(t / t0)))
+    return None
+
+
+def plot_work_precision(rows, column, path, title=""):
+    """Work-precision diagram: error of ``column`` against wall time, one curve per variant."""
+    import matplotlib
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    for label, curve in _curves(rows, column).items():
+        ax.loglog([t for t, _ in curve], [e for _, e in curve], "o-", label=label)
+    ax.set_xlabel("wall time (s)")
+    ax.set_ylabel("max displacement error (m), WG08" if column == "Linf_u"
+                  else f"relative L2 error of {column.split('_', 1)[1]}")
+    ax.set_title(title or "work-precision diagram: lower left is better")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -59,3 +59,48 @@ def test_temporal_study_rates_along_the_time_step_and_unstable_runs_record_error
 def test_wg08_measure_needs_a_displacement():
     with pytest.raises(InputError, match="wg08"):
         convergence("standing_wave_2d", ["dgmpm"], [1], [4], progress=False, measure="wg08")
+
+
+def test_compare_draws_the_work_precision_diagram_and_names_the_fastest(tmp_path, capsys):
+    out = tmp_path / "cmp"
+    rc = main(["compare", "standing_wave_2d", "--methods", "rk-dgfem/rk2,ader-dgfem", "--orders", "1,2",
+               "--cells", "4,8", "--fields", "P11", "--out", str(out), "--quiet", "--workers", "2"])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "fastest to each accuracy" in text
+    rows = list(csv.DictReader(open(out / "compare.csv")))
+    assert len(rows) == 2 * 2 * 2 and all(r["status"] == "ok" for r in rows)
+    assert (out / "work_precision.png").stat().st_size > 10_000
+
+
+def test_winners_interpolate_the_time_to_reach_each_accuracy():
+    from skdgmpm.study import winners
+    rows = [{"method": m, "order": 1, "status": "ok", "wall_s": t, "L2_P11": e}
+            for m, t, e in [("a", 1.0, 1e-1), ("a", 10.0, 1e-3), ("b", 5.0, 1e-2), ("b", 8.0, 1e-4)]]
+    result = {target: (label, s) for target, label, s in winners(rows, "L2_P11")}
+    assert result[1e-1] == ("a P1", 1.0)                        # only a gets there, at once
+    assert result[1e-2][0] == "a P1" and np.isclose(result[1e-2][1], np.sqrt(10.0))   # log-log midpoint
+    assert result[1e-3][0] == "b P1" and np.isclose(result[1e-3][1], 5.0 * np.sqrt(8.0 / 5.0))
+    assert result[1e-4][0] == "b P1" and np.isclose(result[1e-4][1], 8.0) and set(result) == {1e-1, 1e-2, 1e-3, 1e-4}
+
+
+def test_study_on_a_dask_cluster_over_loopback():
+    distributed = pytest.importorskip("distributed")
+    from skdgmpm.executor import make_executor
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp",
+                                  host="127.0.0.1", dashboard_address=None) as cluster:
+        pool = make_executor(dask=cluster.scheduler_address)
+        try:
+            rows = convergence("standing_wave_2d", ["rk-dgfem/rk2"], [1], [4, 8], fields=["P11"],
+                               progress=False, executor=pool)
+        finally:
+            pool.shutdown()
+    here = convergence("standing_wave_2d", ["rk-dgfem/rk2"], [1], [4, 8], fields=["P11"], progress=False)
+    assert [r["L2_P11"] for r in rows] == [r["L2_P11"] for r in here]      # same runs, same numbers
+
+
+def test_unreachable_dask_scheduler_is_a_clear_error():
+    pytest.importorskip("distributed")
+    from skdgmpm.executor import make_executor
+    with pytest.raises(InputError, match="--dask tcp://127.0.0.1:9"):
+        make_executor(dask="tcp://127.0.0.1:9")
