@@ -13,6 +13,7 @@ naming the boundaries the scenes' ``[bc.NAME]`` tables refer to and a physical s
   about h (Frontal-Delaunay for quads, Blossom recombination), finer (h/2) on the hole boundaries so
   the 1 mm ligaments between holes 2, 3 and the bottom, top faces get more than one cell;
   boundaries ``left``, ``right``, ``bottom``, ``top``, ``holes``.
+* ``rectangle(lx, ly, h)``: unstructured quads on a rectangle (the distorted-mesh tests).
 """
 from pathlib import Path
 
@@ -107,7 +108,33 @@ def multiholed(path, h=1e-3, seed=0):
     _write(gmsh, path)
 
 
+def rectangle(path, lx=2.0, ly=0.5, h=0.1, seed=0):
+    """Rectangle [0, lx] x [0, ly] with unstructured (distorted) quads of size about ``h``:
+    boundaries ``left``, ``right``, ``bottom``, ``top`` (patch test and plane wave of the tests)."""
+    gmsh = _start("rectangle")
+    occ = gmsh.model.occ
+    occ.addRectangle(0, 0, 0, lx, ly)
+    occ.synchronize()
+    eps = 1e-6 * max(lx, ly)
+    for dim, tag in gmsh.model.getEntities(1):
+        x0, y0, _, x1, y1, _ = gmsh.model.getBoundingBox(dim, tag)
+        name = ("left" if abs(x1) < eps else "right" if abs(x0 - lx) < eps
+                else "bottom" if abs(y1) < eps else "top")
+        gmsh.model.addPhysicalGroup(1, [tag], name=name)
+    gmsh.model.addPhysicalGroup(2, [tag for _, tag in gmsh.model.getEntities(2)], name="body")
+    gmsh.option.setNumber("Mesh.MeshSizeMax", 2 * h)
+    gmsh.option.setNumber("Mesh.MeshSizeMin", h)
+    gmsh.option.setNumber("Mesh.Algorithm", 8)
+    gmsh.option.setNumber("Mesh.RecombinationAlgorithm", 1)
+    gmsh.option.setNumber("Mesh.RecombineAll", 1)
+    gmsh.option.setNumber("Mesh.SubdivisionAlgorithm", 1)
+    gmsh.option.setNumber("Mesh.RandomSeed", seed)
+    gmsh.model.mesh.generate(2)
+    _write(gmsh, path)
+
+
 MESHES = {
+    "rectangle_2x05_unstructured.msh": lambda p: rectangle(p, 2.0, 0.5, 0.1),
     "lasat_30.msh": lambda p: lasat(p, 30),
     "lasat_12.msh": lambda p: lasat(p, 12),
     "multiholed_cell_1mm.msh": lambda p: multiholed(p, 1e-3),
