@@ -86,9 +86,12 @@ class Result:
         if picard is not None:
             out["picard"] = {"mean_iterations": picard.mean, "max_iterations": picard.max,
                              "not_converged_steps": picard.not_converged}
-        energy = {k: float(v[-1]) for k, v in self.history.items() if k not in ("step", "t")}
+        health = ("min_J", "min_acoustic")
+        energy = {k: float(v[-1]) for k, v in self.history.items() if k not in ("step", "t", *health)}
         energy["balance_change"] = float(self.history["balance"][-1] - self.history["balance"][0])
         out["energy"] = energy
+        out["health"] = {f"{k}_min": float(np.nanmin(self.history[k])) if np.isfinite(self.history[k]).any()
+                         else None for k in health}
         if self.errors:
             out["errors"] = self.errors
         return out
@@ -140,7 +143,7 @@ def compute_errors(disc, state, solution):
 def run(scene, overrides=(), out=None, force=False, progress=True, frames=None, max_steps=None,
         on_step=None):
     """Run ``scene`` (a `Scene`, a name or a path). Writes outputs to ``out`` if given.
-    ``max_steps`` stops the run early (benchmarks); ``on_step(state)`` is called with the initial
+    ``max_steps`` stops the run early (benchmarks); ``on_step(state, disc)`` is called with the initial
     state and after every step (error measures over the whole run, e.g. WG08's).
 
     Output is written to ``<out>.partial`` and renamed at the end, so a failed start leaves
@@ -186,13 +189,17 @@ def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, partial, p
     if partial is not None:
         output.write_grid(partial / "grid.vtu", disc.grid)
 
-    history = {k: [] for k in ("step", "t", "kinetic", "stored", "total", "external_work", "balance")}
+    history = {k: [] for k in ("step", "t", "kinetic", "stored", "total", "external_work", "balance",
+                               "min_J", "min_acoustic")}
 
     def record(st):
         kin, sto = stepper.energy(st)
         for k, v in zip(history, (st.step, st.t, kin, sto, kin + sto, stepper.external_work,
                                   kin + sto - stepper.external_work)):
             history[k].append(v)
+        health = st.health or {}                # run health: set by the stepper's check
+        history["min_J"].append(health.get("min_J", np.nan))
+        history["min_acoustic"].append(health.get("min_acoustic", np.nan))
 
     frame_list, entries = [], []
 
@@ -206,7 +213,7 @@ def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, partial, p
     record(state)
     snapshot(state)
     if on_step is not None:
-        on_step(state)
+        on_step(state, disc)
     next_frame = 1
     status, message = "ok", ""
     bar = _progress(t_end, scene.name, progress)
@@ -218,7 +225,7 @@ def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, partial, p
             state = new
             record(state)
             if on_step is not None:
-                on_step(state)
+                on_step(state, disc)
             if state.t >= next_frame * t_end / max(n_frames, 1) * (1 - 1e-12):
                 snapshot(state)
                 while next_frame * t_end / max(n_frames, 1) <= state.t * (1 + 1e-12):

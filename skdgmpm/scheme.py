@@ -14,6 +14,7 @@ from . import system
 from .bcs import FREE
 from .errors import InputError, InstabilityError
 from .faces import boundary_faces
+from .health import assess
 from .riemann import godunov_state, impedance
 
 
@@ -28,10 +29,11 @@ class ParticleState:
     step: int = 0
     speed: np.ndarray = None   # (n,) fastest wave speed along the grid axes
     dofs: np.ndarray = None    # (n_dofs, d*d + d) grid unknowns of schemes that keep them (DGFEM)
+    health: dict = None        # {"min_J", "min_acoustic"} over the points, set by the check
 
     def copy(self):
         return ParticleState(self.t, self.U.copy(), self.Q.copy(), self.x.copy(), self.step, self.speed,
-                             None if self.dofs is None else self.dofs.copy())
+                             None if self.dofs is None else self.dofs.copy(), self.health)
 
 
 @dataclass
@@ -197,25 +199,15 @@ class GodunovScheme:
         return new
 
     def check(self, state):
-        """Stop on non-finite values or lost hyperbolicity, naming the particle; sets the wave
-        speeds of ``state`` used by the next time step."""
-        finite = np.all(np.isfinite(state.U), axis=1) & np.all(np.isfinite(state.Q), axis=1)
-        F, _ = system.split(state.U, self.d)
-        state.speed, hyperbolic = self.materials.max_speed(
-            np.where(finite[:, None, None], F, np.eye(self.d)), self.particles.material)
-        bad = ~finite | ~hyperbolic
-        if bad.any():
-            p = int(np.flatnonzero(bad)[0])
-            if not finite[p]:
-                what = "non-finite values"
-            elif np.linalg.det(F[p]) <= 0:
-                what = "inverted material (det F <= 0)"
-            else:
-                what = "loss of hyperbolicity"
-            raise InstabilityError(
-                f"{what} at step {state.step}, t = {state.t:.6g} s, particle {p} "
-                f"(X = {np.round(self.particles.X[p], 6).tolist()})",
-                step=state.step, time=state.t, particle=p)
+        """Stop on non-finite values, J <= 0 or lost hyperbolicity, naming the step, time, point,
+        cell, quantity and value (`skdgmpm.health`); sets the wave speeds of ``state`` used by the
+        next time step and its ``health`` record (min J, smallest acoustic eigenvalue)."""
+        health = assess(self.materials, self.particles, state.U, state.Q)
+        state.speed, state.health = health.speed, health.record()
+        failure = health.first_failure(state, self.particles, self.d)
+        if failure is not None:
+            p, message = failure
+            raise InstabilityError(message, step=state.step, time=state.t, particle=p)
 
     def energy(self, state):
         """Kinetic and stored energy (J per unit thickness in 2D, per unit area in 1D)."""

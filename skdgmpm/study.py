@@ -72,13 +72,12 @@ class DisplacementError:
     """WG08 eq 64-65: max over all particles and all steps of |(x_p - X_p) - u(X_p, t)| (m)."""
 
     def __init__(self, solution):
-        self.solution, self.X, self.value = solution, None, 0.0
+        self.solution, self.value = solution, 0.0
 
-    def __call__(self, state):
-        if self.X is None:                      # the initial state: particles at X
-            self.X = state.x.copy()
-        u = self.solution.displacement(self.X, state.t)
-        self.value = max(self.value, float(np.max(np.linalg.norm(state.x - self.X - u, axis=1))))
+    def __call__(self, state, disc):
+        X = disc.particles.X                    # reference positions (x = X + u(X, 0) at the start)
+        u = self.solution.displacement(X, state.t)
+        self.value = max(self.value, float(np.max(np.linalg.norm(state.x - X - u, axis=1))))
 
 
 def study_run(base, overrides, measure="l2", keep_fields=False):

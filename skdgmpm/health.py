@@ -1,0 +1,87 @@
+"""Run health: the quantities that say a state is admissible, and the message when it is not.
+
+For every point carrying the state (particles, or Gauss points for DGFEM): finite values,
+J = det F > 0 and hyperbolicity, i.e. a positive definite acoustic tensor
+A(N)_ij = C_iajb N_a N_b [R18 §4.2]. A is checked along the grid axes and, in 2D, the two
+diagonals (a material can lose hyperbolicity off the axes first: a shear band at 45 degrees).
+The fastest wave *along the grid axes* sets the time step (unchanged: Delta t = CFL h / c_max).
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import system
+
+
+def directions(d):
+    """Unit normals along which hyperbolicity is checked: (n_dir, d), grid axes first."""
+    axes = np.eye(d)
+    if d != 2:
+        return axes
+    return np.vstack([axes, np.array([[1.0, 1.0], [1.0, -1.0]]) / np.sqrt(2.0)])
+
+
+@dataclass
+class Health:
+    """Per-point health of a state.
+
+    Attributes
+    ----------
+    finite : (n,) bool, all of U and Q finite
+    J : (n,) det F (1 where not finite)
+    omega : (n,) smallest acoustic-tensor eigenvalue over `directions` (Pa; nan where not finite)
+    speed : (n,) fastest wave speed along the grid axes (m/s)
+    """
+
+    finite: np.ndarray
+    J: np.ndarray
+    omega: np.ndarray
+    speed: np.ndarray
+
+    @property
+    def bad(self):
+        return ~self.finite | ~(self.J > 0) | ~(self.omega > 0)
+
+    def record(self):
+        """The run-history columns: min J and the smallest acoustic eigenvalue over the points."""
+        ok = self.finite
+        return {"min_J": float(self.J[ok].min()) if ok.any() else np.nan,
+                "min_acoustic": float(self.omega[ok].min()) if ok.any() else np.nan}
+
+    def first_failure(self, state, points, d):
+        """(point index, message) for the first bad point: what failed and its value; None if all
+        are admissible. Order of the checks: non-finite, then J <= 0, then hyperbolicity."""
+        bad = self.bad
+        if not bad.any():
+            return None
+        p = int(np.flatnonzero(bad)[0])
+        where = (f"at step {state.step}, t = {state.t:.6g} s, particle {p} in cell {int(points.cell[p])} "
+                 f"(X = {np.round(points.X[p], 6).tolist()})")
+        if not self.finite[p]:
+            names = [f"F{i + 1}{a + 1}" for i in range(d) for a in range(d)] + [f"p{i + 1}" for i in range(d)]
+            names_q = [f"P{i + 1}{a + 1}" for i in range(d) for a in range(d)] + [f"v{i + 1}" for i in range(d)]
+            row = np.concatenate([state.U[p], state.Q[p]])
+            k = int(np.flatnonzero(~np.isfinite(row))[0])
+            return p, f"non-finite values {where}: {(names + names_q)[k]} = {row[k]}"
+        if not self.J[p] > 0:
+            return p, f"inverted material (det F <= 0) {where}: J = {self.J[p]:.6g}"
+        return p, (f"loss of hyperbolicity {where}: smallest acoustic-tensor eigenvalue "
+                   f"{self.omega[p]:.6g} Pa")
+
+
+def assess(materials, points, U, Q):
+    """`Health` of the state (U, Q) at ``points`` (with ``material``, ``rho0``) for a `MaterialSet`."""
+    n, nc = U.shape
+    d = int(round((-1 + np.sqrt(1 + 4 * nc)) / 2))                      # nc = d * d + d
+    finite = np.all(np.isfinite(U), axis=1) & np.all(np.isfinite(Q), axis=1)
+    F, _ = system.split(U, d)
+    F = np.where(finite[:, None, None], F, np.eye(d))
+    J = np.linalg.det(F)
+    C = materials.tangent(F, points.material)                           # (n, d, d, d, d)
+    N = directions(d)
+    A = np.einsum("niajb,ka,kb->nkij", C, N, N)
+    omega = np.linalg.eigvalsh(0.5 * (A + np.swapaxes(A, -1, -2)))       # (n, n_dir, d)
+    rho = np.array([m.rho for m in materials.materials])[points.material]
+    speed = np.sqrt(np.clip(omega[:, :d].max(axis=(1, 2)), 0.0, None) / rho)
+    omega_min = np.where(finite, omega.min(axis=(1, 2)), np.nan)
+    return Health(finite, np.where(finite, J, 1.0), omega_min, speed)
