@@ -128,7 +128,8 @@ def use_offscreen_window():
             return
 
 
-def _pyvista():
+def offscreen_pyvista():
+    """The pyvista module, with VTK set to render without a display where there is none."""
     try:
         import pyvista
     except ImportError:
@@ -139,7 +140,7 @@ def _pyvista():
 
 def grid_mesh(result, z=0.0):
     """The background grid (reference configuration) as a pyvista mesh."""
-    pv = _pyvista()
+    pv = offscreen_pyvista()
     m = result.disc.grid.mesh
     kind = pv.CellType.LINE if m.dim() == 1 else pv.CellType.QUAD
     cells = np.column_stack([np.full(m.nelements, m.t.shape[0]), m.t.T]).ravel()
@@ -167,7 +168,7 @@ def plotter(result, field="P11", time=None, grid=True, off_screen=True, window_s
 
 def _plotter(result, field, time, grid, off_screen, window_size, clim=None, cmap="coolwarm",
              point_size=None, magnify=1.0, title=None, bounds=None):
-    pv = _pyvista()
+    pv = offscreen_pyvista()
     state = frame(result, time)
     cloud = pv.PolyData(_positions(result, state, magnify))
     cloud[field] = field_values(result, state, field)
@@ -179,7 +180,7 @@ def _plotter(result, field, time, grid, off_screen, window_size, clim=None, cmap
         pl.add_mesh(grid_mesh(result, z=-1e-3 * size), style="wireframe", color="#bbbbbb", line_width=1)
     points = pl.add_points(cloud, scalars=field, cmap=cmap, clim=clim, render_points_as_spheres=True,
                   point_size=point_size or 5, scalar_bar_args={
-                      "title": plots.label(field), "color": "black", "fmt": "%.3g", "vertical": False, "n_labels": 3,
+                      "title": plots.field_label(field), "color": "black", "fmt": "%.3g", "vertical": False, "n_labels": 3,
                       "title_font_size": 14, "label_font_size": 12,
                       "position_x": 0.25, "position_y": 0.03, "width": 0.5, "height": 0.1})
     pl.add_text(title or _title(result, state), font_size=10, color="black", name="title")
@@ -224,19 +225,20 @@ def particles(result, field="P11", time=None, grid=True, path=None, **options):
     return picture
 
 
-def line(result, field="P11", time=None, start=None, end=None, path=None, ax=None):
+def line(result, field="P11", time=None, start=None, end=None, path=None, ax=None, label=None, exact=True):
     """``field`` along the segment [start, end] (reference coordinates; default the bar in 1D,
-    the bottom line of particles in 2D) at ``time``, against the exact solution when there is one.
+    the bottom line of particles in 2D) at ``time``, against the exact solution when there is one
+    (``exact=False`` leaves it out; ``label`` names the particle values in the legend).
 
-    Draws into ``ax`` and returns it if given; otherwise returns a `Picture` (``.figure``),
-    written to ``path`` if given.
+    Draws into ``ax`` and returns it if given (several runs on one axes); otherwise returns a
+    `Picture` (``.figure``), written to ``path`` if given.
     """
     state = frame(result, time)
     if ax is not None:
-        return plots.line(result, field, state, start, end, ax=ax)
+        return plots.line(result, field, state, start, end, ax=ax, label=label, exact=exact)
     from matplotlib.figure import Figure        # no pyplot: the user's backend is left alone
     fig = Figure(figsize=(6.4, 3.6), dpi=100, layout="tight")
-    plots.line(result, field, state, start, end, ax=fig.add_subplot())
+    plots.line(result, field, state, start, end, ax=fig.add_subplot(), label=label, exact=exact)
     picture = Picture(figure=fig)
     if path is not None:
         picture.save(path)
@@ -285,7 +287,7 @@ def animate(result, path, field="P11", grid=True, fps=5, clim=None, window_size=
 def check_rendering(path=None):
     """Render a small coloured point cloud off-screen and check the pixels vary; returns the
     `Picture` and the name of VTK's render window. Raises RuntimeError if the image is blank."""
-    pv = _pyvista()
+    pv = offscreen_pyvista()
     pl = pv.Plotter(off_screen=True, window_size=[240, 160])
     pl.set_background("white")
     xy = np.random.default_rng(0).random((200, 2))

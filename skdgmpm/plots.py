@@ -7,7 +7,7 @@ from .errors import InputError
 UNITS = {"P": "Pa", "sigma": "Pa", "v": "m/s", "x": "m", "speed": "m/s"}
 
 
-def label(field):
+def field_label(field):
     """``P11 (Pa)``, ``v1 (m/s)``, ``F11``: the field name with its unit, if it has one."""
     unit = UNITS.get(field.rstrip("0123456789"))
     return f"{field} ({unit})" if unit else field
@@ -74,25 +74,27 @@ def bottom_segment(result):
     return X[0], X[-1]
 
 
-def line(result, field="P11", state=None, start=None, end=None, ax=None):
+def line(result, field="P11", state=None, start=None, end=None, ax=None, label=None, exact=True):
     """``field`` along the segment [start, end] (default: the bottom line) at the particles,
-    against the exact solution on the segment when the scene has one. Draws into ``ax``."""
+    against the exact solution on the segment when the scene has one (and ``exact``). Draws into
+    ``ax``; ``label`` names the particle values in the legend (default: method and time)."""
     state = state or result.state
     if start is None and end is None:
         start, end = bottom_segment(result)
     a, b = np.asarray(start, dtype=float), np.asarray(end, dtype=float)
     idx, s = segment_particles(result, a, b)
-    horizontal = np.allclose((b - a)[1:], 0.0) and b[0] > a[0]
-    abscissa = (lambda dist: a[0] + dist) if horizontal else (lambda dist: dist)
+    along = [k for k in range(len(a)) if b[k] > a[k] and np.allclose(np.delete(b - a, k), 0.0)]
+    k = along[0] if along else None             # the segment runs along axis k: plot against X_k
+    abscissa = (lambda dist: a[k] + dist) if along else (lambda dist: dist)
     values = result.fields(state)[field][idx]
-    ax.plot(abscissa(s), values, "o", ms=3, label=f"{result.summary()['method']} (t = {state.t:.3g} s)")
-    exact = result.exact.fields(a[None, :], state.t) if result.exact is not None else {}
-    if field in exact:
+    ax.plot(abscissa(s), values, "o", ms=3, label=label or f"{result.summary()['method']} (t = {state.t:.3g} s)")
+    known = result.exact.fields(a[None, :], state.t) if exact and result.exact is not None else {}
+    if field in known:
         dist = np.linspace(0.0, np.linalg.norm(b - a), 2000)
         points = a + np.outer(dist / dist[-1], b - a)
         ax.plot(abscissa(dist), result.exact.fields(points, state.t)[field], "k-", lw=1, label="exact")
-    ax.set_xlabel("X1 (m)" if horizontal else f"distance from {tuple(np.round(a, 6))} (m)")
-    ax.set_ylabel(label(field))
+    ax.set_xlabel(f"X{k + 1} (m)" if along else f"distance from ({', '.join(f'{x:.4g}' for x in a)}) (m)")
+    ax.set_ylabel(field_label(field))
     ax.legend(fontsize=8)
     ax.set_title(result.scene.get("title", result.scene.name))
     return ax

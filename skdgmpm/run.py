@@ -102,10 +102,11 @@ class Result:
         from . import pictures
         return pictures.particles(self, field, time, grid, path, **options)
 
-    def plot_line(self, field="P11", time=None, start=None, end=None, path=None, ax=None):
-        """``field`` along a segment (default: the bottom line) against the exact solution."""
+    def plot_line(self, field="P11", time=None, **options):
+        """``field`` along a segment (default: the bottom line) against the exact solution;
+        ``start``, ``end``, ``path``, ``ax``, ``label``, ``exact``: see `pictures.line`."""
         from . import pictures
-        return pictures.line(self, field, time, start, end, path, ax)
+        return pictures.line(self, field, time, **options)
 
     def animate(self, path, field="P11", **options):
         """The stored frames as a GIF (or MP4) at ``path``; shown inline in Jupyter."""
