@@ -7,16 +7,29 @@ componentwise on U = [F, p]. A cell is *troubled* when its DG solution leaves th
 [min, max] of the neighbouring averages (eq 39) at one of its limiting points; only troubled
 cells are replaced by the limited linear reconstruction u_bar + diag(alpha) grad u_bar (X - X_e)
 (eq 41), so smooth regions keep their order.
+
+Componentwise limiting is not frame invariant (L23 §5.3): rotating a whole scene rotates F and p
+(F -> R F R^T, p -> R p) but the bounds [min, max] of each component are not those of the rotated
+components. The ``-invariant`` kinds limit each block of U (the tensor F, the vector p) with one
+scalar factor alpha_block per cell, built from rotation-independent quantities only: at a limiting
+point with excursion delta = u_q - u_bar (a block, norm |delta| in the Frobenius / Euclidean
+norm), the bound is the largest neighbour difference projected on the excursion's direction,
+M = max(0, max_j (u_bar_j - u_bar) : delta / |delta|), and alpha = g(M / |delta|). The projections
+are inner products of blocks, unchanged by F -> R F R^T, p -> R p, and the least-squares gradient
+rotates with the scene, so the limited solution of a rotated scene is the rotated limited
+solution. In 1D it is the componentwise limiter.
 """
 import numpy as np
 
 from .errors import InputError
 
-KINDS = ("none", "barth-jespersen", "venkatakrishnan")
+KINDS = ("none", "barth-jespersen", "venkatakrishnan", "barth-jespersen-invariant",
+         "venkatakrishnan-invariant")
+INVARIANT = "-invariant"
 
 
 def _g(x, kind):
-    if kind == "barth-jespersen":
+    if kind.startswith("barth-jespersen"):
         return np.minimum(1.0, x)
     return (x * x + 2 * x) / (x * x + x + 2)
 
@@ -54,6 +67,48 @@ class SlopeLimiter:
         # ... instead, a cell's own values on the body's boundary widen its bounds (data there are
         # not a new extremum)
         self.boundary_rows = (st.boundary.T_L, st.boundary.cell_L)
+        self.invariant = kind.endswith(INVARIANT)
+        if self.invariant:
+            d = st.d
+            self.blocks = (slice(0, d * d), slice(d * d, d * d + d))          # F, p
+            # padded tables: face neighbours of each cell, and its own boundary rows (padding
+            # points back at the cell itself: a zero difference, which never raises the bound)
+            self.neighbours = _table(np.r_[pairs[:, 0], pairs[:, 1]], np.r_[pairs[:, 1], pairs[:, 0]], nel)         # (nel, K) cells
+            self.boundary_table = _table(np.asarray(self.boundary_rows[1]), np.arange(len(self.boundary_rows[1])),
+                                         nel, pad=-1)                      # (nel, Kb) boundary rows
+
+    def _invariant_alpha(self, dofs, mean):
+        """One factor per cell and block (F, p) from rotation-independent projections, and the
+        troubled cells (a limiting point beyond the projected bound)."""
+        diffs = [mean[self.neighbours] - mean[:, None, :]]                 # (nel, K, nc)
+        T_b, _ = self.boundary_rows
+        if T_b.shape[0]:
+            values_b = np.vstack([T_b @ dofs, np.zeros((1, dofs.shape[1]))])
+            rows = self.boundary_table
+            own = np.where((rows >= 0)[:, :, None], values_b[rows] - mean[:, None, :], 0.0)
+            diffs.append(own)
+        diffs = np.concatenate(diffs, axis=1)
+        n_blocks = len(self.blocks)
+        alpha = np.ones((self.nel, n_blocks))
+        troubled = np.zeros(self.nel, dtype=bool)
+        scales = [np.linalg.norm(mean[:, b], axis=1).max() + 1e-300 for b in self.blocks]
+        for T, cell, _ in self.rows:
+            if T.shape[0] == 0:
+                continue
+            excursion = T @ dofs - mean[cell]
+            for k, (b, scale) in enumerate(zip(self.blocks, scales)):
+                delta = excursion[:, b]
+                size = np.linalg.norm(delta, axis=1)
+                moved = size > 1e-14 * scale
+                unit = delta / np.where(moved, size, 1.0)[:, None]
+                bound = np.maximum(np.einsum("rkc,rc->rk", diffs[cell][:, :, b], unit).max(axis=1), 0.0)
+                np.logical_or.at(troubled, cell, size > bound + 1e-12 * scale)
+                ratio = np.clip(bound / np.where(moved, size, 1.0), 0.0, 1e6)
+                np.minimum.at(alpha[:, k], cell, np.where(moved, _g(ratio, self.kind), 1.0))
+        per_component = np.ones_like(mean)
+        for k, b in enumerate(self.blocks):
+            per_component[:, b] = alpha[:, k, None]
+        return per_component, troubled
 
     def averages(self, dofs):
         U = (self.st.B @ dofs).reshape(self.nel, self.nq, -1)
@@ -81,6 +136,9 @@ class SlopeLimiter:
         np.add.at(rhs, i, contrib)
         np.add.at(rhs, j, contrib)                  # for j: ((u_i - u_j)/d) (-unit), the same product
         grad = np.einsum("ekd,ecd->eck", self.G_inv, rhs)                   # (nel, nc, d)
+        if self.invariant:
+            alpha, troubled = self._invariant_alpha(dofs, mean)
+            return self._replace(dofs, mean, grad, alpha, troubled)
         alpha = np.ones_like(mean)
         troubled = np.zeros(self.nel, dtype=bool)
         scale = np.abs(mean).max(axis=0) + 1e-300
@@ -94,6 +152,10 @@ class SlopeLimiter:
             moved = np.abs(excursion) > 1e-14 * scale
             ratio = np.clip(bound / np.where(moved, excursion, 1.0), 0.0, 1e6)    # g(1e6) ~ 1
             np.minimum.at(alpha, cell, np.where(moved, _g(ratio, self.kind), 1.0))
+        return self._replace(dofs, mean, grad, alpha, troubled)
+
+    def _replace(self, dofs, mean, grad, alpha, troubled):
+        """Troubled cells get the limited linear reconstruction u_bar + alpha grad (X - X_e)."""
         if not troubled.any():
             return dofs, 0
         cells = np.flatnonzero(troubled)
@@ -102,3 +164,17 @@ class SlopeLimiter:
         out = dofs.copy()
         out[self.st.cell_dofs[cells]] = np.einsum("ebq,eqc->ebc", self.st.point_to_dofs[cells], linear)
         return out, int(len(cells))
+
+
+def _table(owner, value, n, pad=None):
+    """Padded (n, K) table of the ``value``s of each ``owner`` (K = the largest count); padding is
+    the owner's own index, or ``pad``."""
+    owner, value = np.asarray(owner, dtype=np.int64), np.asarray(value, dtype=np.int64)
+    counts = np.bincount(owner, minlength=n)
+    width = max(int(counts.max()) if len(owner) else 0, 1)
+    table = np.repeat(np.arange(n)[:, None], width, axis=1) if pad is None else np.full((n, width), pad)
+    order = np.argsort(owner, kind="stable")
+    start = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    slot = np.arange(len(owner)) - start[owner[order]]
+    table[owner[order], slot] = value[order]
+    return table
