@@ -21,6 +21,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from skdgmpm.errors import InputError
+from skdgmpm.manufactured import MANUFACTURED
 
 __all__ = ["EXACT", "ElasticBarStep", "SVKBarRiemann", "error_norms", "make_exact"]
 
@@ -333,7 +334,7 @@ INITIAL = {"square_initial_strain": SquareInitialStrain}
 
 
 EXACT = {"elastic_bar_step": ElasticBarStep, "svk_bar_riemann": SVKBarRiemann,
-         "standing_wave_2d": StandingWave2D}
+         "standing_wave_2d": StandingWave2D, **MANUFACTURED}     # manufactured: built from the scene's material
 
 
 def make_exact(name, **params):

@@ -15,6 +15,7 @@ import numpy as np
 
 from . import exact as exact_solutions
 from .errors import InputError
+from .materials import make_material
 
 NUMBER = (int, float)
 # key -> expected type(s); a dict is a sub-table; None is a free-form table checked later
@@ -179,6 +180,14 @@ def exact_solution(scene):
     name = spec.pop("name", None)
     mat = scene.data["material"]
     params = {"E": mat.get("E"), "rho": mat.get("rho")}
+    if name in exact_solutions.MANUFACTURED:             # any law: the scene's own material object
+        law = dict(mat)
+        try:
+            params = {"material": make_material(law.pop("law", "linear_elastic"), **law)}
+        except InputError as exc:
+            raise InputError(f"{scene.where('material')}: {str(exc).removeprefix('material: ')}") from None
+        if name == "mms_ring":
+            params.update(scene.get("body.ring") or {})  # the ring that holds the particles
     if name in ("svk_bar_riemann", "standing_wave_2d"):
         params["nu"] = mat.get("nu")
     if name == "standing_wave_2d":
