@@ -18,6 +18,11 @@ derivatives). From the constant guess the predictor is therefore exact after P +
 
 Corrector (eq 28-33): u^{n+1} = u^n + dt sum_s w_s M^-1 R(q_hat[s]) with the volume term at the
 Gauss points and Godunov fluxes at every facet Gauss point, q traced from the predictor.
+
+Source S = [0, rho0 b(X, t)] (a body force, e.g. of a manufactured solution): the standard ADER
+predictor with a source, u_hat[s] = U^n + dt sum_s' T[s, s'] (S[s'] - sum_alpha D_alpha F_alpha),
+S at the predictor's points and time nodes t_n + tau_s dt (known, so T S is computed once per
+step); the corrector adds int Phi S at the Gauss points at the same time nodes.
 """
 from dataclasses import dataclass, field
 
@@ -72,7 +77,7 @@ class ADERDGFEM(DGFEM):
     picard_max: int = 0                     # 0: 2P + 2
     picard_guess: str = "taylor"            # or "constant" (u_hat = U^n at every time node)
     stages: tuple = ("time_step", "predictor", "volume_flux", "boundary_flux", "interface_flux",
-                     "corrector", "evaluate_points")
+                     "source", "corrector", "evaluate_points")
     picard: PicardStats = field(default_factory=PicardStats, init=False)
 
     def __post_init__(self):
@@ -108,24 +113,37 @@ class ADERDGFEM(DGFEM):
         n_rep = flat.shape[0] // len(points)
         return self.point_state(flat, np.tile(points.cell, n_rep), np.tile(points.rho0, n_rep)).reshape(shape)
 
-    def predictor(self, U_points, dt):
-        """Space-time predictor: (u_hat, q_hat) of shape (P+1, nel, nq, nc) and the iterations."""
-        nel, nq = self.basis.dx.shape
-        return self._picard(U_points.reshape(nel, nq, -1), dt, self._law, self.D_points, self.D_points)
+    def space_time_source(self, points, time, dt):
+        """Source values at ``points`` and the time nodes t_n + tau_s dt: (P+1, n, nc), or None
+        without a body force."""
+        if self.body_force is None:
+            return None
+        return np.stack([self.source(points, time + tau * dt) for tau in self.tau])
 
-    def _picard(self, U, dt, law, D, D_taylor):
+    def predictor(self, U_points, dt, source=None):
+        """Space-time predictor: (u_hat, q_hat) of shape (P+1, nel, nq, nc) and the iterations;
+        ``source`` (P+1, n_points, nc) from `space_time_source` at the Gauss points."""
+        nel, nq = self.basis.dx.shape
+        S = None if source is None else source.reshape(len(self.tau), nel, nq, -1)
+        return self._picard(U_points.reshape(nel, nq, -1), dt, self._law, self.D_points, self.D_points, S)
+
+    def _picard(self, U, dt, law, D, D_taylor, source=None):
         """Picard iterations of L23 eq 62 on per-cell values U (nel, n, nc) at t_n, with the law
         ``law`` on (..., nel, n, nc) arrays, the predictor's derivative matrices D and those of the
-        Taylor guess D_taylor (d, nel, n, n). Returns (u_hat, q_hat), (P+1, nel, n, nc)."""
+        Taylor guess D_taylor (d, nel, n, n), and the source (P+1, nel, n, nc) or None.
+        Returns (u_hat, q_hat), (P+1, nel, n, nc)."""
         u_hat = np.broadcast_to(U[None], (len(self.tau),) + U.shape)
         if self.picard_guess == "taylor":                                       # L23 eq 64
             u_hat = u_hat - dt * self.tau[:, None, None, None] * self._divergence(law(U), D_taylor)[None]
+            if source is not None:          # S at tau_s rather than t_n: only the guess, O(dt^2) apart
+                u_hat = u_hat + dt * self.tau[:, None, None, None] * source
+        U0 = U[None] if source is None else U[None] + dt * np.einsum("st,tenc->senc", self.T_tau, source)
         d = self.d                                  # change measured per block (F, p)
         scale = np.ones(U.shape[-1])
         scale[: d * d] = np.abs(U[..., : d * d]).max() or 1.0
         scale[d * d:] = np.abs(U[..., d * d:]).max() or 1.0
         for it in range(1, self.picard_max + 1):
-            new = U[None] - dt * np.einsum("st,tenc->senc", self.T_tau, self._divergence(law(u_hat), D))
+            new = U0 - dt * np.einsum("st,tenc->senc", self.T_tau, self._divergence(law(u_hat), D))
             change = np.max(np.abs(new - u_hat) / scale)
             u_hat = new
             if change <= self.picard_tol:
@@ -140,8 +158,9 @@ class ADERDGFEM(DGFEM):
         out[self.cell_dofs] = np.einsum("ebq,eqc->ebc", self.B_inv, values)
         return out
 
-    def corrector(self, dofs, u_hat, q_hat, time, dt):
-        """u^{n+1} = u^n + dt sum_s w_s M^-1 R(q_hat(tau_s)); returns it and the boundary work."""
+    def corrector(self, dofs, u_hat, q_hat, time, dt, source=None):
+        """u^{n+1} = u^n + dt sum_s w_s M^-1 (R(q_hat(tau_s)) + int Phi S(tau_s)); returns it and
+        the boundary work. ``source``: (P+1, n_gauss, nc) at the Gauss points, or None."""
         R_total = np.zeros_like(dofs)
         work = 0.0
         nc = dofs.shape[1]
@@ -150,9 +169,12 @@ class ADERDGFEM(DGFEM):
             grid_state = GridState(self._coefficients(u_hat[s]), self._coefficients(q_hat[s]))
             R, power = self.surface_residual(grid_state, time + tau * dt, dt)
             R_total += w * (R + self.volume_flux_points(Q_points))
+            if source is not None:
+                R_total += w * self.source_integral(source[s])
             work += w * dt * power
         return self.limit(dofs + dt * self.apply_mass_inverse(R_total)), work
 
     def advance(self, U, time, dt):
-        u_hat, q_hat = self.predictor(self.B @ U, dt)
-        return self.corrector(U, u_hat, q_hat, time, dt)
+        S = self.space_time_source(self.gauss, time, dt)       # predictor and corrector share it
+        u_hat, q_hat = self.predictor(self.B @ U, dt, S)
+        return self.corrector(U, u_hat, q_hat, time, dt, S)

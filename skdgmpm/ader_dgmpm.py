@@ -11,7 +11,9 @@ with the law evaluated at the particles at every Picard iteration and the Taylor
 (collocated MLS gradients). The grid solution at t_n is the L2 projection of the MLS
 reconstruction onto the DG space (exact for polynomials the MLS basis reproduces). The corrector
 evaluates the predictor with chi at the Gauss and facet points. Back-mapping: PIC (eq 65) or FLIP
-(eq 66); then the law at the particles.
+(eq 66); then the law at the particles. A body force enters the predictor at the particles (its
+values there are the MLS coefficients, as for U) and the corrector at the Gauss points, both at
+the time nodes t_n + tau_s dt.
 """
 from dataclasses import dataclass
 
@@ -126,10 +128,12 @@ class ADERDGMPM(ADERDGFEM):
         out[self.slot] = values
         return out.reshape((self.basis.dx.shape[0], self.n_max) + values.shape[1:])
 
-    def predictor(self, U_particles, dt):
-        """Space-time predictor with dofs at the particles: (u_hat, q_hat) (P+1, n_particles, nc)."""
+    def predictor(self, U_particles, dt, source=None):
+        """Space-time predictor with dofs at the particles: (u_hat, q_hat) (P+1, n_particles, nc);
+        ``source`` (P+1, n_particles, nc) from `space_time_source` at the particles, or None."""
+        S = None if source is None else np.stack([self._padded(s) for s in source])   # P+1 time nodes
         u_hat, q_hat = self._picard(self._padded(U_particles), dt, self._law_cells, self.D_particles,
-                                    self.grad_at_particles)
+                                    self.grad_at_particles, S)
         unpad = lambda a: a.reshape(len(self.tau), -1, a.shape[-1])[:, self.slot]
         return unpad(u_hat), unpad(q_hat)
 
@@ -145,12 +149,14 @@ class ADERDGMPM(ADERDGFEM):
         return self.point_state(U, self.particles.cell, self.particles.rho0)
 
     # ---------------------------------------------------------------- corrector and back-map
-    def corrector(self, dofs, u_hat, q_hat, time, dt):
+    def corrector(self, dofs, u_hat, q_hat, time, dt, source=None):
         R_total = np.zeros_like(dofs)
         work = 0.0
         for s, (tau, w) in enumerate(zip(self.tau, self.w_tau)):
             R, power = self.surface_residual(GridState(u_hat[s], q_hat[s]), time + tau * dt, dt)
             R_total += w * (R + self.volume_flux_points(self.E_gauss @ q_hat[s]))
+            if source is not None:
+                R_total += w * self.source_integral(source[s])
             work += w * dt * power
         return self.limit(dofs + dt * self.apply_mass_inverse(R_total)), work
 
@@ -158,8 +164,9 @@ class ADERDGMPM(ADERDGFEM):
         dofs_n = self.project(self.E_gauss @ state.U)                 # grid image of the MLS field
 
         def attempt(dt):
-            u_hat, q_hat = self.predictor(state.U, dt)
-            dofs, work = self.corrector(dofs_n, u_hat, q_hat, state.t, dt)
+            u_hat, q_hat = self.predictor(state.U, dt, self.space_time_source(self.particles, state.t, dt))
+            dofs, work = self.corrector(dofs_n, u_hat, q_hat, state.t, dt,
+                                        self.space_time_source(self.gauss, state.t, dt))
             if self.backmap == "pic":
                 U = self.S @ dofs
             else:

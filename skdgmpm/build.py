@@ -175,6 +175,9 @@ def build(scene):
             stepper = ADERDGMPM(grid, mats, bcs, cell_material, order=order, cfl=cfl, particles_in=particles,
                                 mls_order=method.get("mls_order", -1), backmap=method.get("backmap", "pic"),
                                 limiter=method.get("limiter", "none"))
+    solution = exact_solution(scene)
+    if getattr(solution, "body_force", None) is not None:    # manufactured solution: source rho0 b
+        stepper.body_force = solution.body_force
     n = len(stepper.particles)
     init = scene.get("initial") or {}
     v0 = _array(scene, "initial.velocity", init.get("velocity", [0.0] * d), (d,), f"{d} number(s) (m/s)")
@@ -182,7 +185,7 @@ def build(scene):
     F0, v0 = np.broadcast_to(F0, (n, d, d)).copy(), np.broadcast_to(v0, (n, d)).copy()
     source = None
     if init.get("exact"):
-        source = exact_solution(scene)
+        source = solution
         if source is None:
             raise InputError(f"{scene.where('initial.exact')} = true needs an [exact] table")
     elif "field" in init:
@@ -203,6 +206,8 @@ def build(scene):
     try:
         with np.errstate(over="ignore", invalid="ignore"):
             initial = stepper.initial_state(F0, v0)
+        if hasattr(source, "displacement"):             # a deformed start: x = X + u(X, 0)
+            initial.x = initial.x + source.displacement(stepper.particles.X, 0.0)
         with np.errstate(over="ignore", invalid="ignore"):
             energy = stepper.energy(initial)
         if not np.all(np.isfinite(energy)):

@@ -5,7 +5,7 @@ points: consistent mass (block diagonal, inverted once per cell), volume term
 ``sum_q w_q dPhi_i/dX_alpha F_alpha(Q(X_q))`` with the law evaluated at the Gauss points, and
 Godunov fluxes at every facet Gauss point from the same Riemann solver and boundary conditions.
 Time integration: TVD-RK2 (Heun) or classical RK4; Delta t = CFL h_min / ((2P + 1) c_max)
-[L23 eq 67].
+[L23 eq 67]. A body force adds ``int Phi rho0 b`` at the Gauss points, at each stage's time.
 
 The Gauss points play the part of the particles for everything downstream (fields, energy,
 errors, VTK output): ``self.particles`` holds them with their quadrature weights as volumes.
@@ -55,6 +55,7 @@ class DGFEM(GodunovScheme):
     cell_material : (n_cells,) material index of each active cell
     order : P in 1..3 (any P >= 1 works); cfl : Courant number of L23 eq 67
     integrator : "rk2" (TVD-RK2) | "rk4"
+    body_force : callable (X (n, d), t) -> b (n, d) in m/s^2, or None (no source, no cost)
     """
 
     grid: object
@@ -64,12 +65,13 @@ class DGFEM(GodunovScheme):
     order: int = 1
     cfl: float = 0.5
     integrator: str = "rk2"
-    stages: tuple = ("time_step", "volume_flux", "boundary_flux", "interface_flux", "advance",
+    stages: tuple = ("time_step", "volume_flux", "boundary_flux", "interface_flux", "source", "advance",
                      "evaluate_points")
     external_work: float = field(default=0.0, init=False)
     transverse: str = "none"
     limiter: str = "none"
     limited_cells: int = field(default=0, init=False)
+    body_force: object = None
 
     def __post_init__(self):
         if self.integrator not in INTEGRATORS:
@@ -159,10 +161,17 @@ class DGFEM(GodunovScheme):
             R += D.T @ system.join(flux, -P[:, :, a])
         return R
 
+    def source_integral(self, S):
+        """int Phi S from values S (n_points, nc) at the Gauss points (Gauss quadrature)."""
+        return self.B.T @ (self.gauss.volume[:, None] * S)
+
     def rate(self, U_dofs, time, dt):
-        """dU/dt = M^-1 (volume + surface terms) and the boundary power."""
+        """dU/dt = M^-1 (volume + surface terms + source) and the boundary power."""
         R, power = self.surface_residual(GridState(U_dofs, None), time, dt)
-        return self.apply_mass_inverse(R + self.volume_flux(U_dofs)), power
+        R += self.volume_flux(U_dofs)
+        if self.body_force is not None:
+            R += self.source_integral(self.source(self.gauss, time))
+        return self.apply_mass_inverse(R), power
 
     def limit(self, dofs):
         """The slope limiter (L23 §3.3), when the scene switches it on."""

@@ -3,11 +3,13 @@
 One step is the list of named stages of R18 §5 (a)-(h):
 
     project -> time_step -> volume_flux -> boundary_flux -> interface_flux -> transverse_flux
-    -> advance -> back_map -> constitutive_update
+    -> source -> advance -> back_map -> constitutive_update
 
 ``advance`` is forward Euler [R18 eq 20] or Heun's RK2 with both stages on the grid [R18 §7.1]
 (the second stage evaluates the law at the grid nodes). ``transverse_flux`` adds the CTU
-corrections of R18 §4.4 in 2D (``transverse="ctu"``); DCU leaves it out.
+corrections of R18 §4.4 in 2D (``transverse="ctu"``); DCU leaves it out. ``source`` adds
+int Phi rho0 b = sum_p S_ip V_p rho0 b(X_p, t) when a body force is set (particle quadrature, at
+the time the boundary values are taken).
 """
 from dataclasses import dataclass, field
 
@@ -32,6 +34,7 @@ class DGMPM(GodunovScheme):
     bcs : list of (boundary name, BoundaryCondition); later entries override earlier ones on
         shared faces; boundary faces with no condition are free (zero traction).
     cfl : Courant number; integrator : "euler" | "rk2"; transverse : "dcu" | "ctu" (2D)
+    body_force : callable (X (n, d), t) -> b (n, d) in m/s^2, or None (no source, no cost)
     """
 
     grid: object
@@ -41,8 +44,9 @@ class DGMPM(GodunovScheme):
     cfl: float = 1.0
     integrator: str = "euler"
     transverse: str = "dcu"
+    body_force: object = None
     stages: tuple = ("project", "time_step", "volume_flux", "boundary_flux", "interface_flux",
-                     "transverse_flux", "advance", "back_map", "constitutive_update")
+                     "transverse_flux", "source", "advance", "back_map", "constitutive_update")
     external_work: float = field(default=0.0, init=False)
 
     def __post_init__(self):
@@ -158,9 +162,12 @@ class DGMPM(GodunovScheme):
         return T @ grid_state.Q, (T @ grid_state.U)[:, : d * d].reshape(-1, d, d), T @ self.map.rho
 
     def residual(self, grid_state, time, dt):
-        """M dU/dt = K^alpha F_alpha - int Phi F_N*; also returns the boundary power (W)."""
+        """M dU/dt = K^alpha F_alpha - int Phi F_N* + int Phi S; also returns the boundary power (W)."""
         R, power = self.surface_residual(grid_state, time, dt)
-        return R + self.volume_flux(grid_state), power
+        R += self.volume_flux(grid_state)
+        if self.body_force is not None:          # int Phi rho0 b, the particles as quadrature
+            R += self.map.S.T @ (self.particles.volume[:, None] * self.source(self.particles, time))
+        return R, power
 
     def advance(self, grid_state, time, dt):
         """(f) forward Euler [R18 eq 20] or Heun's RK2, both stages on the grid."""

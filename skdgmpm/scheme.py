@@ -79,6 +79,16 @@ class GodunovScheme:
 
     face_options = {}
     external_work = 0.0
+    body_force = None            # b(X, t) -> (n, d) in m/s^2 (a manufactured solution's); None: no source
+
+    def source(self, points, time):
+        """Point values of the source [0, rho0 b(X, t)] of ``dU/dt + DIV F = S`` at ``points``
+        (anything with ``X`` (n, d) and ``rho0`` (n,)): (n, d*d + d), zero in the F rows. Each
+        scheme integrates it against Phi with its own quadrature."""
+        d = self.d
+        S = np.zeros((len(points.X), system.n_components(d)))
+        S[:, d * d:] = points.rho0[:, None] * self.body_force(points.X, time)
+        return S
 
     def _setup_boundary(self, element):
         m = self.grid.submesh
