@@ -190,11 +190,12 @@ def build(scene):
             raise InputError(f"{scene.where('initial.exact')} = true needs an [exact] table")
     elif "field" in init:
         spec = dict(init["field"])
-        name = spec.pop("name", None)
-        if name not in INITIAL:
-            raise InputError(f"{scene.where('initial.field.name')} = {name!r}: expected one of {', '.join(INITIAL)}")
+        field_name = spec.pop("name", None)          # not `name`: that is the method's
+        if field_name not in INITIAL:
+            raise InputError(f"{scene.where('initial.field.name')} = {field_name!r}: expected one of "
+                             f"{', '.join(INITIAL)}")
         try:
-            source = INITIAL[name](**spec)
+            source = INITIAL[field_name](**spec)
         except TypeError as exc:
             raise InputError(f"{scene.where('initial.field')}: {exc}") from None
     if source is not None:
