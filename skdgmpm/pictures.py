@@ -21,6 +21,7 @@ import numpy as np
 from . import output, plots
 from .errors import InputError
 
+
 class Picture:
     """A rendered picture: ``array`` (height, width, 3) uint8 pixels, ``figure`` the matplotlib
     figure of a line plot (None for a pyvista picture). Shown inline by Jupyter."""
@@ -160,7 +161,9 @@ def plotter(result, field="P11", time=None, grid=True, off_screen=True, window_s
     coloured by ``field``, over the background grid (``grid=False`` hides it).
 
     ``magnify`` scales the displacement x - X (small-strain scenes show nothing at 1);
-    ``point_size`` is in pixels (default: about one particle spacing); ``clim`` = (lo, hi).
+    ``point_size`` is in pixels (default: about one particle spacing); ``clim`` = (lo, hi)
+    (default: the values' range, symmetric about 0 if they take both signs). ``off_screen=False``
+    gives a plotter whose ``show()`` opens a window (needs a display).
     """
     return _plotter(result, field, time, grid, off_screen, window_size, clim, cmap, point_size,
                     magnify, title)[0]
@@ -178,11 +181,11 @@ def _plotter(result, field, time, grid, off_screen, window_size, clim=None, cmap
     size = float(np.ptp(result.X, axis=0).max())
     if grid:
         pl.add_mesh(grid_mesh(result, z=-1e-3 * size), style="wireframe", color="#bbbbbb", line_width=1)
+    bar = {"title": plots.field_label(field), "color": "black", "fmt": "%.3g", "vertical": False,
+           "n_labels": 3, "title_font_size": 14, "label_font_size": 12,
+           "position_x": 0.25, "position_y": 0.03, "width": 0.5, "height": 0.1}
     points = pl.add_points(cloud, scalars=field, cmap=cmap, clim=clim, render_points_as_spheres=True,
-                  point_size=point_size or 5, scalar_bar_args={
-                      "title": plots.field_label(field), "color": "black", "fmt": "%.3g", "vertical": False, "n_labels": 3,
-                      "title_font_size": 14, "label_font_size": 12,
-                      "position_x": 0.25, "position_y": 0.03, "width": 0.5, "height": 0.1})
+                           point_size=point_size or 5, scalar_bar_args=bar)
     pl.add_text(title or _title(result, state), font_size=10, color="black", name="title")
     pl.view_xy()
     pl.enable_parallel_projection()
