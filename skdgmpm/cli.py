@@ -1,4 +1,4 @@
-"""Command line: ``skdgmpm run | list | stability``."""
+"""Command line: ``skdgmpm run | list | stability | converge | compare | bench | cfl-limit | compare-figures``."""
 import argparse
 import json
 import sys
@@ -118,6 +118,47 @@ def _cmd_bench(args):
     return 0
 
 
+def _out_dir(args, default):
+    from pathlib import Path
+
+    out = Path(args.out if args.out is not None else default)
+    if out.exists() and any(out.iterdir()) and not args.force:
+        raise InputError(f"--out {out}: directory exists and is not empty (use --force to replace it)")
+    return out
+
+
+def _cmd_cfl_limit(args):
+    from . import stability_study as ss
+
+    out = _out_dir(args, f"runs/cfl_limit_{_stem(args.scene)}")
+    done = ss.study(args.scene, [m.strip() for m in args.methods.split(",") if m.strip()],
+                    [x.strip() for x in args.limiters.split(",") if x.strip()], args.set, args.workers,
+                    hi=args.hi, tol=args.tol, progress=not args.quiet)
+    table = ss.format_table(done)
+    print(table)
+    out.mkdir(parents=True, exist_ok=True)
+    ss.write_csv(out / "trials.csv", done)
+    (out / "cfl_limit.md").write_text(table + "\n")
+    print(f"-> {out}/cfl_limit.md, trials.csv")
+    return 0
+
+
+def _cmd_compare_figures(args):
+    from . import figures
+
+    out = _out_dir(args, f"runs/compare_{_stem(args.scene)}")
+    snaps, files, wall = figures.main_compare(args.scene, [g for g in args.groups.split(",") if g], args.set,
+                                              args.workers, out, args.dgmpm_cfl, progress=not args.quiet)
+    for s in snaps:
+        print(f"{s.method:<18} t = {s.time:.4g} s: {s.status}, {s.steps} steps, {s.wall_s:.1f} s"
+              + (f" ({s.message})" if s.message else ""))
+    for row in figures.agreement(snaps):
+        print(f"t = {row['t']:.4g} s {row['field']:>8}: spread {row['spread']:.3f} of max |median| "
+              f"(farthest: {row['farthest']})")
+    print(f"-> {out}: {', '.join(files)} ({wall:.0f} s)")
+    return 0
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="skdgmpm", description="DGMPM solver for impacts on solids")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -174,6 +215,33 @@ def main(argv=None):
     p.add_argument("--json", default=None, help="also write the rows and the machine to this JSON file")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_bench)
+
+    p = sub.add_parser("cfl-limit", help="largest stable CFL per method and limiter (bisection, in parallel)")
+    p.add_argument("scene", help="scene name or path, e.g. lasat_2d")
+    p.add_argument("--methods", default="dgmpm,rk-dgfem/rk2 S1,ader-dgfem S1T1,ader-dgmpm S1T1",
+                   help="comma-separated labels of skdgmpm.stability_study.VARIANTS")
+    p.add_argument("--limiters", default="none,barth-jespersen",
+                   help="none, barth-jespersen, venkatakrishnan, barth-jespersen-invariant, ...")
+    p.add_argument("--hi", type=float, default=1.6, help="largest CFL tried (bracket (0, hi])")
+    p.add_argument("--tol", type=float, default=0.05, help="bisection stops when the bracket is this narrow")
+    p.add_argument("--workers", type=int, default=None, help="parallel processes (default: all cores; 1: serial)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scene key, e.g. a coarse mesh: --set 'grid.mesh=\"lasat_12.msh\"'")
+    p.add_argument("--out", default=None, help="output directory (default runs/cfl_limit_SCENE)")
+    p.add_argument("--force", action="store_true", help="replace an existing output directory")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_cfl_limit)
+
+    p = sub.add_parser("compare-figures", help="sigma11 maps and bottom-line plots of several methods (PNG, CSV)")
+    p.add_argument("scene", help="scene name or path, e.g. multiholed_cell_2d")
+    p.add_argument("--groups", default="S1,S2,dgmpm", help="S1 (S1T1 methods), S2 (S2T2), dgmpm")
+    p.add_argument("--dgmpm-cfl", type=float, default=0.5, help="CFL of first-order DGMPM (CTU, 1 ppc)")
+    p.add_argument("--workers", type=int, default=None, help="parallel processes (default: all cores; 1: serial)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene key")
+    p.add_argument("--out", default=None, help="output directory (default runs/compare_SCENE)")
+    p.add_argument("--force", action="store_true", help="replace an existing output directory")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_compare_figures)
 
     p = sub.add_parser("list", help="list the scenes")
     p.set_defaults(func=_cmd_list)
