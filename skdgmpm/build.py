@@ -84,6 +84,19 @@ def active_cells(scene, mesh):
         cells = cells[keep]
         if len(cells) == 0:
             raise InputError(f"{scene.where('body.box')} = {body['box']!r} holds no cell")
+    if "ring" in body:                      # stair-stepped annulus [WG08 §5.2]: cells centred in it
+        ring = body["ring"]
+        ok = (mesh.dim() == 2 and set(ring) == {"centre", "radii"}
+              and all(isinstance(ring[k], list) and len(ring[k]) == 2 and all(_number(x) for x in ring[k])
+                      for k in ring) and 0 <= ring["radii"][0] < ring["radii"][1])
+        if not ok:
+            raise InputError(f"{scene.where('body.ring')} = {ring!r} must be {{centre = [x, y], "
+                             f"radii = [R_I, R_O]}} (m, 0 <= R_I < R_O) in 2D")
+        centre = mesh.p[:, mesh.t].mean(axis=1)[:, cells]
+        r = np.hypot(centre[0] - ring["centre"][0], centre[1] - ring["centre"][1])
+        cells = cells[(r >= ring["radii"][0]) & (r <= ring["radii"][1])]
+        if len(cells) == 0:
+            raise InputError(f"{scene.where('body.ring')} = {ring!r} holds no cell")
     return cells
 
 
