@@ -230,27 +230,28 @@ def rates(method, order, cells, **kw):
     ("ader-dgmpm", 1, None, (4, 8)),
 ])
 def test_high_order_methods_converge_at_p_plus_1(method, order, integrator, cells, record_property):
-    """L2 rates of F11 and v1 between the two finest grids >= P + 1 - 0.3 (measured: RK-DGFEM P1
-    1.88 / 2.05, P2 2.93 / 3.05; ADER-DGFEM P1 2.07 / 2.14; ADER-DGMPM P1 1.94 / 1.94)."""
+    """L2 rates between the two finest grids: v1 >= P + 1 - 0.3, F11 >= P + 1 - 0.5 (F11 is still
+    pre-asymptotic there: RK-DGFEM P1 1.71 on 8 -> 16, 1.87 on 16 -> 32). Measured F11 / v1:
+    RK-DGFEM P1 1.71 / 2.00, P2 2.76 / 3.30; ADER-DGFEM P1 1.78 / 1.97; ADER-DGMPM P1 1.86 / 2.01."""
     r = rates(method, order, cells, integrator=integrator)
     record_property("rates", r)
-    assert all(v[-1] >= order + 1 - 0.3 for v in r.values()), r
+    assert r["v1"][-1] >= order + 1 - 0.3 and r["F11"][-1] >= order + 1 - 0.5, r
 
 
 def test_first_order_dgmpm_converges_and_needs_the_source(record_property):
-    """DGMPM (2 x 2 ppc, Euler, CFL 0.4) is first order: rates ~1 (measured 0.98-1.05). Without
-    the body force its error does not decrease (v1: 0.21, 0.25 on 8, 16 cells): 4x larger at 16."""
+    """DGMPM (2 x 2 ppc, Euler, CFL 0.4) is first order: rates ~1 on 8 -> 16 cells (measured 1.07;
+    4 cells take 2 steps). Without the body force its v1 error is 7.5 times larger on 16 cells."""
     r = rates("dgmpm", 1, (4, 8, 16))
     record_property("rates", r)
     assert all(v[-1] > 0.8 for v in r.values()), r
-    assert errors("dgmpm", 1, 16, body=False)["v1"] > 3 * errors("dgmpm", 1, 16)["v1"]
+    assert errors("dgmpm", 1, 16, body=False)["v1"] > 4 * errors("dgmpm", 1, 16)["v1"]
 
 
 @pytest.mark.parametrize("method, order, integrator", [("rk-dgfem", 1, "rk2"), ("ader-dgfem", 1, None),
                                                        ("ader-dgmpm", 1, None)])
 def test_without_the_body_force_the_error_is_far_larger(method, order, integrator):
     """The source enters every stage (RK) and the predictor and corrector (ADER): on 8 x 8 cells
-    the errors without it are 25-55 times larger."""
+    the F11 and v1 errors without it are 16-28 times larger."""
     with_b, without = (errors(method, order, 8, integrator=integrator, body=b) for b in (True, False))
     assert all(without[k] > 10 * with_b[k] for k in ("F11", "v1")), (with_b, without)
 
