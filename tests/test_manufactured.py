@@ -12,7 +12,7 @@ The (F, p) system only keeps that mode still through curl grad v = 0, which the 
 does not honour at the grid scale, so the unlimited high-order DG methods grow it at a rate ~ c/h
 (frozen-state Jacobian, RK-DGFEM P1: largest real eigenvalue 2.3e3 1/s on 4 x 4 cells, 5.0e3 on
 8 x 8, localised at the corner, eigenvector F12 = -F21; zero for the linear law). At A = 0.02 the
-growth stays below the truncation error over the test's 1/8 period. The limitation is recorded by
+growth stays below the truncation error over the tests' 1/16 period. The limitation is recorded by
 the strict xfail below.
 """
 import functools
