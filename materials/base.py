@@ -35,6 +35,20 @@ def _check_parameter(name, value, lower, upper):
         raise InputError(f"material: {name} = {value!r} must be a finite number {bounds}")
 
 
+def cofactor(F):
+    """Cofactor matrix cof F = det(F) F^-T and det F of ``(..., 3, 3)`` arrays, in closed form
+    (several times faster than batched LAPACK on 3 x 3 matrices; det F = 0 gives cof F anyway)."""
+    F = np.asarray(F, dtype=float)
+    a, b, c = F[..., 0, 0], F[..., 0, 1], F[..., 0, 2]
+    d, e, f = F[..., 1, 0], F[..., 1, 1], F[..., 1, 2]
+    g, h, i = F[..., 2, 0], F[..., 2, 1], F[..., 2, 2]
+    cof = np.empty_like(F)
+    cof[..., 0, 0], cof[..., 0, 1], cof[..., 0, 2] = e * i - f * h, f * g - d * i, d * h - e * g
+    cof[..., 1, 0], cof[..., 1, 1], cof[..., 1, 2] = c * h - b * i, a * i - c * g, b * g - a * h
+    cof[..., 2, 0], cof[..., 2, 1], cof[..., 2, 2] = b * f - c * e, c * d - a * f, a * e - b * d
+    return cof, a * cof[..., 0, 0] + b * cof[..., 0, 1] + c * cof[..., 0, 2]
+
+
 @dataclass(frozen=True, kw_only=True)
 class Material(ABC):
     """Isotropic elastic material, immutable, with keyword-only parameters.
@@ -129,5 +143,5 @@ class Material(ABC):
     def cauchy(self, F):
         """Cauchy stress sigma = P F^T / J, shape ``(..., 3, 3)`` (Pa)."""
         F = np.asarray(F, dtype=float)
-        J = np.linalg.det(F)
+        J = cofactor(F)[1]
         return self.first_piola(F) @ np.swapaxes(F, -1, -2) / J[..., None, None]

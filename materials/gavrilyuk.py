@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import Material, _check_parameter
+from .base import Material, _check_parameter, cofactor
 
 _I = np.eye(3)
 
@@ -39,10 +39,12 @@ class Gavrilyuk(Material):
 
     def _kinematics(self, F):
         F = np.asarray(F, dtype=float)
-        ok = np.linalg.det(F) > 0.0
-        F = np.where(ok[..., None, None], F, _I)
-        J = np.linalg.det(F)
-        G = np.swapaxes(np.linalg.inv(F), -1, -2)
+        cof, J = cofactor(F)
+        ok = J > 0.0
+        if not ok.all():                        # identity where inverted: no NaN downstream
+            F = np.where(ok[..., None, None], F, _I)
+            cof, J = cofactor(F)
+        G = cof / J[..., None, None]
         I1 = np.einsum("...ia,...ia->...", F, F)
         I1b = J ** (-2 / 3) * I1
         dI1b = (J ** (-2 / 3))[..., None, None] * (2 * F - 2 / 3 * I1[..., None, None] * G)

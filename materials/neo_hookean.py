@@ -4,7 +4,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import Material
+from .base import Material, cofactor
 
 _I = np.eye(3)
 
@@ -26,13 +26,17 @@ class NeoHookean(Material):
     def _admissible(self, F):
         """``(F_safe, ok)``: F with I substituted where J <= 0, and the mask J > 0."""
         F = np.asarray(F, dtype=float)
-        ok = np.linalg.det(F) > 0.0
+        ok = cofactor(F)[1] > 0.0
         return np.where(ok[..., None, None], F, _I), ok
 
     def _kinematics(self, F):
-        Fs, ok = self._admissible(F)
-        G = np.swapaxes(np.linalg.inv(Fs), -1, -2)
-        return Fs, G, np.log(np.linalg.det(Fs)), ok
+        F = np.asarray(F, dtype=float)
+        cof, J = cofactor(F)
+        ok = J > 0.0
+        if not ok.all():                        # identity where inverted: no NaN downstream
+            F = np.where(ok[..., None, None], F, _I)
+            cof, J = cofactor(F)
+        return F, cof / J[..., None, None], np.log(J), ok
 
     def first_piola(self, F):
         Fs, G, lnJ, _ = self._kinematics(F)

@@ -6,6 +6,29 @@ import numpy as np
 from .system import embed
 
 
+def eigvalsh_small(A):
+    """Eigenvalues (ascending) of symmetric (n, d, d) matrices; closed form for d <= 2 (the
+    per-step check of every particle), LAPACK otherwise."""
+    d = A.shape[-1]
+    if d == 1:
+        return A[..., 0, :].copy()
+    if d == 2:
+        m = 0.5 * (A[..., 0, 0] + A[..., 1, 1])
+        r = np.hypot(0.5 * (A[..., 0, 0] - A[..., 1, 1]), 0.5 * (A[..., 0, 1] + A[..., 1, 0]))
+        return np.stack([m - r, m + r], axis=-1)
+    return np.linalg.eigvalsh(A)
+
+
+def det_small(F):
+    """det of (n, d, d) matrices; closed form for d <= 2."""
+    d = F.shape[-1]
+    if d == 1:
+        return F[..., 0, 0].copy()
+    if d == 2:
+        return F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
+    return np.linalg.det(F)
+
+
 @dataclass(frozen=True)
 class MaterialSet:
     """The scene's materials and, for a batch of points, which one applies (``index`` (n,))."""
@@ -59,7 +82,7 @@ class MaterialSet:
         rho = np.empty(len(F))
         for k, mat in enumerate(self.materials):
             rho[index == k] = mat.rho
-        omega = np.stack([np.linalg.eigvalsh(C[:, :, a, :, a]) for a in range(d)], axis=1)
-        ok = np.all(omega > 0, axis=(1, 2)) & (np.linalg.det(F) > 0)
+        omega = np.stack([eigvalsh_small(C[:, :, a, :, a]) for a in range(d)], axis=1)
+        ok = np.all(omega > 0, axis=(1, 2)) & (det_small(F) > 0)
         speed = np.sqrt(np.clip(omega.max(axis=(1, 2)), 0.0, None) / rho)
         return speed, ok

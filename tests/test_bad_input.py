@@ -91,7 +91,7 @@ def here(tmp_path, monkeypatch):
     (["run.frames=-3"], ["run.frames = -3"]),
     (["method.cfl=3"], ["method.cfl = 3"]),
     (['method.integrator="rk4"'], ["bar_elastic_1d.toml", "method.integrator", "'rk4'"]),
-    (['method.name="mpm"'], ["method.name", "'mpm'"]),
+    (['method.name="fem"'], ["method.name", "'fem'", "mpm"]),
     (["dim=3"], ["dim = 3"]),
     (["particles.per_cell=0"], ["bar_elastic_1d.toml", "particles.per_cell = 0"]),
     (['particles.per_cell=["a"]'], ["particles.per_cell", "'a'"]),
