@@ -32,12 +32,19 @@ def impedance(C, N, rho0, inverse=False):
     d = 1, 2 in closed form (sqrt(M) = (M + s I) / sqrt(tr M + 2 s), s = sqrt(det M)),
     otherwise by eigen-decomposition.
     """
+    Z, Zinv = impedances(C, N, rho0)
+    return Zinv if inverse else Z
+
+
+def impedances(C, N, rho0):
+    """Z = sqrt(rho0 A_N) and its inverse, (nf, d, d) each, from one decomposition."""
     M = rho0[:, None, None] * acoustic_tensor(C, N)
     d = M.shape[1]
     if d == 1:
         if not np.all(M > 0):
             _not_hyperbolic(M[:, 0, 0] <= 0)
-        return 1.0 / np.sqrt(M) if inverse else np.sqrt(M)
+        Z = np.sqrt(M)
+        return Z, 1.0 / Z
     if d == 2:
         det = M[:, 0, 0] * M[:, 1, 1] - M[:, 0, 1] * M[:, 1, 0]
         tr = M[:, 0, 0] + M[:, 1, 1]
@@ -45,15 +52,14 @@ def impedance(C, N, rho0, inverse=False):
             _not_hyperbolic(~((det > 0) & (tr > 0)))
         s = np.sqrt(det)
         Z = (M + s[:, None, None] * np.eye(2)) / np.sqrt(tr + 2 * s)[:, None, None]
-        if not inverse:
-            return Z
-        adj = np.stack([np.stack([Z[:, 1, 1], -Z[:, 0, 1]], 1), np.stack([-Z[:, 1, 0], Z[:, 0, 0]], 1)], 1)
-        return adj / (Z[:, 0, 0] * Z[:, 1, 1] - Z[:, 0, 1] * Z[:, 1, 0])[:, None, None]
+        adj = np.empty_like(Z)
+        adj[:, 0, 0], adj[:, 0, 1], adj[:, 1, 0], adj[:, 1, 1] = Z[:, 1, 1], -Z[:, 0, 1], -Z[:, 1, 0], Z[:, 0, 0]
+        return Z, adj / (Z[:, 0, 0] * Z[:, 1, 1] - Z[:, 0, 1] * Z[:, 1, 0])[:, None, None]
     omega, Y = np.linalg.eigh(M)
     if not np.all(omega > 0):
         _not_hyperbolic(np.any(omega <= 0, axis=1))
-    z = 1.0 / np.sqrt(omega) if inverse else np.sqrt(omega)
-    return np.einsum("fik,fk,fjk->fij", Y, z, Y)
+    z = np.sqrt(omega)
+    return np.einsum("fik,fk,fjk->fij", Y, z, Y), np.einsum("fik,fk,fjk->fij", Y, 1.0 / z, Y)
 
 
 def _matvec(A, x):
@@ -115,8 +121,7 @@ def transverse_positive(w_F, w_p, C, n, rho0):
     r_k = [Y_k (x) n ; -rho0 c_k Y_k] of d F_n / dU gives the closed form
     B+ w = [ (Z^-1 g - w_p / rho0) / 2 (x) n ;  -g / 2 + Z w_p / (2 rho0) ].
     """
-    g = np.einsum("fiajb,fjb,fa->fi", C, w_F, n)
-    Z = impedance(C, n, rho0)
-    Zinv = impedance(C, n, rho0, inverse=True)
+    g = np.einsum("fia,fa->fi", np.einsum("fiajb,fjb->fia", C, w_F), n)
+    Z, Zinv = impedances(C, n, rho0)
     a = 0.5 * (_matvec(Zinv, g) - w_p / rho0[:, None])
     return a[:, :, None] * n[:, None, :], -0.5 * g + 0.5 * _matvec(Z, w_p) / rho0[:, None]
