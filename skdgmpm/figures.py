@@ -42,7 +42,8 @@ class Snapshot:
     """What a figure needs from one run: points (reference and current), fields, run record."""
 
     method: str
-    time: float
+    time: float            # the figure time asked for (the run stops earlier if it goes unstable)
+    t_final: float
     status: str
     message: str
     steps: int
@@ -61,7 +62,7 @@ def _snapshot(scene_name, method, overrides, t):
     m = r.stepper.grid.submesh
     edges = m.facets[:, m.boundary_facets()]
     outline = [m.p[:, e].T for e in edges.T]
-    return Snapshot(method, float(r.state.t), r.status, r.message, int(r.state.step), r.wall_s, r.X.copy(),
+    return Snapshot(method, t, float(r.state.t), r.status, r.message, int(r.state.step), r.wall_s, r.X.copy(),
                     r.state.x.copy(), {k: f[k].copy() for k in FIELDS}, outline)
 
 
@@ -119,14 +120,12 @@ def write(snaps, out, scene_name):
     import matplotlib.pyplot as plt
 
     out.mkdir(parents=True, exist_ok=True)
-    times = sorted({round(s.time, 12) for s in snaps if s.status == "ok"} | {round(s.time, 12) for s in snaps})
-    methods = list(dict.fromkeys(s.method for s in snaps))
     with open(out / "runs.csv", "w", newline="") as fh:
         w = csv.writer(fh)
-        w.writerow(["method", "t", "status", "steps", "wall_s", "sigma11_min", "sigma11_max", "v1_min", "v1_max",
-                    "message"])
+        w.writerow(["method", "t", "t_final", "status", "steps", "wall_s", "sigma11_min", "sigma11_max", "v1_min",
+                    "v1_max", "message"])
         for s in snaps:
-            w.writerow([s.method, f"{s.time:.6g}", s.status, s.steps, f"{s.wall_s:.2f}",
+            w.writerow([s.method, f"{s.time:.6g}", f"{s.t_final:.6g}", s.status, s.steps, f"{s.wall_s:.2f}",
                         *(f"{fn(s.fields[k]):.6g}" for k in FIELDS for fn in (np.min, np.max)), s.message])
     with open(out / "lines.csv", "w", newline="") as fh:
         w = csv.writer(fh)
