@@ -222,7 +222,7 @@ def main(argv=None):
                    help="comma-separated labels of skdgmpm.stability_study.VARIANTS")
     p.add_argument("--limiters", default="none,barth-jespersen",
                    help="none, barth-jespersen, venkatakrishnan, barth-jespersen-invariant, ...")
-    p.add_argument("--hi", type=float, default=1.6, help="largest CFL tried (bracket (0, hi])")
+    p.add_argument("--hi", type=float, default=2.0, help="largest CFL tried (2: the most a scene accepts)")
     p.add_argument("--tol", type=float, default=0.05, help="bisection stops when the bracket is this narrow")
     p.add_argument("--workers", type=int, default=None, help="parallel processes (default: all cores; 1: serial)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",

@@ -67,7 +67,15 @@ def _snapshot(scene_name, method, overrides, t):
 
 
 def line_values(snapshot, n=200):
-    """(X1, x1, {field: values}) on the bottom line by the point-line interpolator."""
+    """(X1, x1, {field: values}) on the bottom line by the point-line interpolator (computed once
+    per snapshot)."""
+    cached = getattr(snapshot, "_line", None)
+    if cached is None or len(cached[0]) != n:
+        cached = snapshot._line = _line_values(snapshot, n)
+    return cached
+
+
+def _line_values(snapshot, n):
     from scipy.interpolate import griddata
 
     X = snapshot.X

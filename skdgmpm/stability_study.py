@@ -149,7 +149,7 @@ def chains(scene, methods, limiters, overrides=()):
 
 
 def study(scene, methods=("dgmpm", "rk-dgfem/rk2 S1", "ader-dgfem S1T1", "ader-dgmpm S1T1"),
-          limiters=("none", "barth-jespersen"), overrides=(), workers=None, lo=0.0, hi=1.6, tol=0.05,
+          limiters=("none", "barth-jespersen"), overrides=(), workers=None, lo=0.0, hi=2.0, tol=0.05,
           progress=False):
     """Critical CFL of every (method, limiter) chain of ``scene``, chains in parallel."""
     from .executor import make_executor
