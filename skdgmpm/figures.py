@@ -54,7 +54,7 @@ class Snapshot:
     outline: list          # boundary edges of the body in the reference configuration
 
 
-def _snapshot(scene_name, method, overrides, t):
+def _snapshot(scene_name, method, overrides, t, fields=FIELDS):
     from .run import run
 
     r = run(scene_name, [*overrides, f"run.t_end={t!r}"], progress=False, frames=1)
@@ -63,7 +63,7 @@ def _snapshot(scene_name, method, overrides, t):
     edges = m.facets[:, m.boundary_facets()]
     outline = [m.p[:, e].T for e in edges.T]
     return Snapshot(method, t, float(r.state.t), r.status, r.message, int(r.state.step), r.wall_s, r.X.copy(),
-                    r.state.x.copy(), {k: f[k].copy() for k in FIELDS}, outline)
+                    r.state.x.copy(), {k: f[k].copy() for k in dict.fromkeys([*FIELDS, *fields])}, outline)
 
 
 def line_values(snapshot, n=200):
@@ -102,6 +102,7 @@ def compare(scene, groups=("S1", "S2", "dgmpm"), overrides=(), times=None, worke
 
     s = load_scene(scene, overrides)
     times = times or s.get("figures.times") or [s.get("run.t_end")]
+    fields = tuple(s.get("figures.fields") or ("sigma11",))
     tasks = []
     for g in groups:
         if g not in GROUPS:
@@ -109,7 +110,7 @@ def compare(scene, groups=("S1", "S2", "dgmpm"), overrides=(), times=None, worke
         for method, extra in GROUPS[g].items():
             extra = [*extra, f"method.cfl={dgmpm_cfl!r}"] if g == "dgmpm" else extra
             for t in times:
-                tasks.append((str(s.path or scene), method, [*overrides, *extra], float(t)))
+                tasks.append((str(s.path or scene), method, [*overrides, *extra], float(t), fields))
     bar = progress_bar(progress, len(tasks), desc=f"compare {s.name}", unit="run")
     with make_executor(workers) as pool:
         futures = [pool.submit(_snapshot, *task) for task in tasks]
@@ -121,11 +122,14 @@ def compare(scene, groups=("S1", "S2", "dgmpm"), overrides=(), times=None, worke
     return snaps
 
 
-def write(snaps, out, scene_name):
-    """maps_t*.png, line_sigma11.png, line_v1.png, lines.csv, runs.csv in ``out``."""
+def write(snaps, out, scene_name, map_fields=("sigma11",)):
+    """map_FIELD_t*.png (``map_fields``: the scene's ``[figures] fields``), line_sigma11.png,
+    line_v1.png, lines.csv, runs.csv in ``out``."""
     import matplotlib
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
+
+    from .plots import field_label
 
     out.mkdir(parents=True, exist_ok=True)
     with open(out / "runs.csv", "w", newline="") as fh:
@@ -146,20 +150,20 @@ def write(snaps, out, scene_name):
     by_time = {}
     for s in snaps:
         by_time.setdefault(round(s.time, 12), []).append(s)
-    for t, group in sorted(by_time.items()):
-        values = np.concatenate([s.fields["sigma11"] for s in group])
+    for (t, group), field in ((item, f) for item in sorted(by_time.items()) for f in map_fields):
+        values = np.concatenate([s.fields[field] for s in group])
         lim = np.nanpercentile(np.abs(values), 99.5) or 1.0
         fig, axes = plt.subplots(1, len(group), figsize=(3.6 * len(group), 3.4), squeeze=False)
         for ax, s in zip(axes[0], group):
             for e in s.outline:
                 ax.plot(e[:, 0], e[:, 1], "-", color="0.6", lw=0.6)
-            sc = ax.scatter(s.x[:, 0], s.x[:, 1], c=s.fields["sigma11"], s=4, cmap="coolwarm", vmin=-lim, vmax=lim)
+            sc = ax.scatter(s.x[:, 0], s.x[:, 1], c=s.fields[field], s=4, cmap="coolwarm", vmin=-lim, vmax=lim)
             ax.set_aspect("equal")
             ax.set_title(f"{s.method}\n{s.status}", fontsize=8)
             ax.tick_params(labelsize=6)
-        fig.colorbar(sc, ax=axes[0].tolist(), shrink=0.8, label="sigma11 (Pa)")
-        fig.suptitle(f"{scene_name}: sigma11, current configuration, t = {t:.4g} s", fontsize=9)
-        fig.savefig(out / f"map_sigma11_t{t:.4g}.png", dpi=110)
+        fig.colorbar(sc, ax=axes[0].tolist(), shrink=0.8, label=field_label(field))
+        fig.suptitle(f"{scene_name}: {field}, current configuration, t = {t:.4g} s", fontsize=9)
+        fig.savefig(out / f"map_{field}_t{t:.4g}.png", dpi=110)
         plt.close(fig)
     for field in FIELDS:
         fig, axes = plt.subplots(1, len(by_time), figsize=(5 * len(by_time), 3.5), squeeze=False)
@@ -201,6 +205,8 @@ def agreement(snaps):
 
 def main_compare(scene, groups, overrides, workers, out, dgmpm_cfl=0.5, progress=True):
     start = time.perf_counter()
+    from .scene import load_scene
+
     snaps = compare(scene, groups, overrides, workers=workers, dgmpm_cfl=dgmpm_cfl, progress=progress)
-    files = write(snaps, out, scene)
+    files = write(snaps, out, scene, tuple(load_scene(scene, overrides).get("figures.fields") or ("sigma11",)))
     return snaps, files, time.perf_counter() - start
