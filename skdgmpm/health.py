@@ -80,7 +80,9 @@ def assess(materials, points, U, Q):
     J = det_small(F)
     C = materials.tangent(F, points.material)                           # (n, d, d, d, d)
     N = directions(d)
-    A = np.einsum("niajb,kab->nkij", C, N[:, :, None] * N[:, None, :])  # two operands: fast path
+    # A[n, k] = C_iajb N_ka N_kb as one matrix product (n i j, a b) x (a b, k)
+    Ct = C.transpose(0, 1, 3, 2, 4).reshape(-1, d * d)
+    A = (Ct @ (N[:, :, None] * N[:, None, :]).reshape(len(N), d * d).T).reshape(n, d, d, -1).transpose(0, 3, 1, 2)
     omega = eigvalsh_small(0.5 * (A + np.swapaxes(A, -1, -2)))           # (n, n_dir, d)
     rho = np.array([m.rho for m in materials.materials])[points.material]
     speed = np.sqrt(np.clip(omega[:, :d].max(axis=(1, 2)), 0.0, None) / rho)

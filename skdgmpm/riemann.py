@@ -17,8 +17,11 @@ from .errors import InstabilityError
 
 
 def acoustic_tensor(C, N):
-    """A_ij = C_iajb N_a N_b: (nf, d, d)."""
-    return np.einsum("fiaj,fa->fij", np.einsum("fiajb,fb->fiaj", C, N), N)
+    """A_ij = C_iajb N_a N_b: (nf, d, d), as a batch of (d*d, d*d) @ (d*d,) products (several
+    times faster than einsum on these tiny axes)."""
+    nf, d = N.shape
+    Ct = C.transpose(0, 1, 3, 2, 4).reshape(nf, d * d, d * d)              # (f, ij, ab)
+    return np.matmul(Ct, (N[:, :, None] * N[:, None, :]).reshape(nf, d * d, 1)).reshape(nf, d, d)
 
 
 def _not_hyperbolic(bad):
@@ -121,7 +124,9 @@ def transverse_positive(w_F, w_p, C, n, rho0):
     r_k = [Y_k (x) n ; -rho0 c_k Y_k] of d F_n / dU gives the closed form
     B+ w = [ (Z^-1 g - w_p / rho0) / 2 (x) n ;  -g / 2 + Z w_p / (2 rho0) ].
     """
-    g = np.einsum("fia,fa->fi", np.einsum("fiajb,fjb->fia", C, w_F), n)
+    nf, d = n.shape
+    Cw = np.matmul(C.reshape(nf, d * d, d * d), w_F.reshape(nf, d * d, 1)).reshape(nf, d, d)   # C : w_F
+    g = np.matmul(Cw, n[:, :, None])[:, :, 0]
     Z, Zinv = impedances(C, n, rho0)
     a = 0.5 * (_matvec(Zinv, g) - w_p / rho0[:, None])
     return a[:, :, None] * n[:, None, :], -0.5 * g + 0.5 * _matvec(Z, w_p) / rho0[:, None]
