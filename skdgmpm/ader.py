@@ -100,9 +100,9 @@ class ADERDGFEM(DGFEM):
         D = self.D_points if D is None else D
         P, v = Q[..., : d * d], Q[..., d * d:]
         out = np.zeros_like(Q)
-        for a in range(d):
-            out[..., a: d * d: d] -= np.einsum("eqr,...erc->...eqc", D[a], v)
-            out[..., d * d:] -= np.einsum("eqr,...erc->...eqc", D[a], P[..., a::d])
+        for a in range(d):                        # batched per-cell products (BLAS), not einsum
+            out[..., a: d * d: d] -= np.matmul(D[a], v)
+            out[..., d * d:] -= np.matmul(D[a], P[..., a::d])
         return out
 
     def _law(self, U, points=None):
@@ -137,13 +137,13 @@ class ADERDGFEM(DGFEM):
             u_hat = u_hat - dt * self.tau[:, None, None, None] * self._divergence(law(U), D_taylor)[None]
             if source is not None:          # S at tau_s rather than t_n: only the guess, O(dt^2) apart
                 u_hat = u_hat + dt * self.tau[:, None, None, None] * source
-        U0 = U[None] if source is None else U[None] + dt * np.einsum("st,tenc->senc", self.T_tau, source)
+        U0 = U[None] if source is None else U[None] + dt * np.tensordot(self.T_tau, source, axes=1)
         d = self.d                                  # change measured per block (F, p)
         scale = np.ones(U.shape[-1])
         scale[: d * d] = np.abs(U[..., : d * d]).max() or 1.0
         scale[d * d:] = np.abs(U[..., d * d:]).max() or 1.0
         for it in range(1, self.picard_max + 1):
-            new = U0 - dt * np.einsum("st,tenc->senc", self.T_tau, self._divergence(law(u_hat), D))
+            new = U0 - dt * np.tensordot(self.T_tau, self._divergence(law(u_hat), D), axes=1)
             change = np.max(np.abs(new - u_hat) / scale)
             u_hat = new
             if change <= self.picard_tol:
@@ -155,7 +155,7 @@ class ADERDGFEM(DGFEM):
     def _coefficients(self, values):
         """Per-cell point values (nel, nq, nc) -> DG coefficients (n_dofs, nc)."""
         out = np.empty((self.n_dofs, values.shape[-1]))
-        out[self.cell_dofs] = np.einsum("ebq,eqc->ebc", self.B_inv, values)
+        out[self.cell_dofs] = np.matmul(self.B_inv, values)
         return out
 
     def corrector(self, dofs, u_hat, q_hat, time, dt, source=None):

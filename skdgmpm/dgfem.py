@@ -123,7 +123,7 @@ class DGFEM(GodunovScheme):
         """M^-1 R with the per-cell inverse blocks."""
         Rc = R[self.cell_dofs]                                   # (nel, nb, nc)
         out = np.empty_like(R)
-        out[self.cell_dofs] = np.einsum("ekl,elc->ekc", self.mass_inv, Rc)
+        out[self.cell_dofs] = np.matmul(self.mass_inv, Rc)
         return out
 
     def project(self, U_points):

@@ -52,9 +52,13 @@ CASES = {
     "mms_axis_aligned_2d/mpm-cd-cpgimp": ("mms_axis_aligned_2d", ["grid.cells=[8, 8]", 'method.name="mpm"',
                                                                   'method.update="cd"']),
     "mms_ring_2d/dgmpm": ("mms_ring_2d", []),
-    "lasat_2d/ader-dgfem-1": ("lasat_2d", ['method.name="ader-dgfem"', "method.order=1"]),
+    # without the scene's limiter: whether a cell at the threshold is limited is decided by
+    # round-off (another BLAS may flip it), so limited runs are compared on a 1D shock only
+    "lasat_2d/ader-dgfem-1": ("lasat_2d", ['method.name="ader-dgfem"', "method.order=1",
+                                           'method.limiter="none"']),
     "multiholed_cell_2d/ader-dgmpm-1": ("multiholed_cell_2d", ['method.name="ader-dgmpm"', "method.order=1",
-                                                               "particles.per_cell=[0.25, 0.75]"]),
+                                                               "particles.per_cell=[0.25, 0.75]",
+                                                               'method.limiter="none"']),
 }
 
 
