@@ -32,11 +32,11 @@ class SerialExecutor(Executor):
         return future
 
 
-def make_executor(workers=None, dask=None):
+def make_executor(workers=None, dask=None, timeout="10s"):
     """A process pool of ``workers`` processes (None: ``os.cpu_count()``), a serial executor for
     ``workers=1``, or, with ``dask`` = a scheduler address, an executor on that Dask cluster."""
     if dask is not None:
-        return _dask_executor(dask)
+        return _dask_executor(dask, timeout)
     if workers is None:
         workers = os.cpu_count() or 1
     if not (isinstance(workers, int) and not isinstance(workers, bool) and workers >= 1):
@@ -46,14 +46,14 @@ def make_executor(workers=None, dask=None):
     return ProcessPoolExecutor(max_workers=workers)
 
 
-def _dask_executor(address):
+def _dask_executor(address, timeout):
     try:
         from distributed import Client
     except ImportError:
         raise InputError(f"--dask {address}: the 'distributed' package is not installed "
                          f"(pip install 'skdgmpm[dask]')") from None
     try:
-        client = Client(address, timeout="10s")
+        client = Client(address, timeout=timeout)
     except (OSError, TimeoutError) as exc:
         raise InputError(f"--dask {address}: cannot reach the scheduler ({exc})") from None
     executor = client.get_executor()

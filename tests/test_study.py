@@ -103,4 +103,4 @@ def test_unreachable_dask_scheduler_is_a_clear_error():
     pytest.importorskip("distributed")
     from skdgmpm.executor import make_executor
     with pytest.raises(InputError, match="--dask tcp://127.0.0.1:9"):
-        make_executor(dask="tcp://127.0.0.1:9")
+        make_executor(dask="tcp://127.0.0.1:9", timeout="1s")
