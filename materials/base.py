@@ -49,6 +49,19 @@ def cofactor(F):
     return cof, a * cof[..., 0, 0] + b * cof[..., 0, 1] + c * cof[..., 0, 2]
 
 
+def admissible_inverse(F):
+    """``(F_safe, G, J, ok)`` for laws defined only for J > 0: F with I substituted where
+    J = det F <= 0 (so nothing downstream turns NaN), G = F_safe^-T, its determinant J and the
+    mask J > 0 of the given F."""
+    F = np.asarray(F, dtype=float)
+    cof, J = cofactor(F)
+    ok = J > 0.0
+    if not ok.all():
+        F = np.where(ok[..., None, None], F, np.eye(3))
+        cof, J = cofactor(F)
+    return F, cof / J[..., None, None], J, ok
+
+
 @dataclass(frozen=True, kw_only=True)
 class Material(ABC):
     """Isotropic elastic material, immutable, with keyword-only parameters.

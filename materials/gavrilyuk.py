@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import Material, _check_parameter, cofactor
+from .base import Material, _check_parameter, admissible_inverse, cofactor
 
 _I = np.eye(3)
 
@@ -38,13 +38,7 @@ class Gavrilyuk(Material):
         _check_parameter("a", self.a, -1.0 - 1e-12, 0.5 + 1e-12)
 
     def _kinematics(self, F):
-        F = np.asarray(F, dtype=float)
-        cof, J = cofactor(F)
-        ok = J > 0.0
-        if not ok.all():                        # identity where inverted: no NaN downstream
-            F = np.where(ok[..., None, None], F, _I)
-            cof, J = cofactor(F)
-        G = cof / J[..., None, None]
+        F, G, J, ok = admissible_inverse(F)
         I1 = np.einsum("...ia,...ia->...", F, F)
         I1b = J ** (-2 / 3) * I1
         dI1b = (J ** (-2 / 3))[..., None, None] * (2 * F - 2 / 3 * I1[..., None, None] * G)
@@ -84,4 +78,4 @@ class Gavrilyuk(Material):
         return np.where(ok, W, np.inf)
 
     def is_hyperbolic(self, F, N):
-        return super().is_hyperbolic(F, N) & (np.linalg.det(np.asarray(F, dtype=float)) > 0.0)
+        return super().is_hyperbolic(F, N) & (cofactor(np.asarray(F, dtype=float))[1] > 0.0)

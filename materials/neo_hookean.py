@@ -4,7 +4,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import Material, cofactor
+from .base import Material, admissible_inverse, cofactor
 
 _I = np.eye(3)
 
@@ -23,20 +23,9 @@ class NeoHookean(Material):
     how callers must detect an inverted element. Shapes as in `skdgmpm.materials.base`.
     """
 
-    def _admissible(self, F):
-        """``(F_safe, ok)``: F with I substituted where J <= 0, and the mask J > 0."""
-        F = np.asarray(F, dtype=float)
-        ok = cofactor(F)[1] > 0.0
-        return np.where(ok[..., None, None], F, _I), ok
-
     def _kinematics(self, F):
-        F = np.asarray(F, dtype=float)
-        cof, J = cofactor(F)
-        ok = J > 0.0
-        if not ok.all():                        # identity where inverted: no NaN downstream
-            F = np.where(ok[..., None, None], F, _I)
-            cof, J = cofactor(F)
-        return F, cof / J[..., None, None], np.log(J), ok
+        F, G, J, ok = admissible_inverse(F)
+        return F, G, np.log(J), ok
 
     def first_piola(self, F):
         Fs, G, lnJ, _ = self._kinematics(F)
@@ -67,4 +56,4 @@ class NeoHookean(Material):
         return np.where(ok, W, np.inf)
 
     def is_hyperbolic(self, F, N):
-        return super().is_hyperbolic(F, N) & self._admissible(F)[1]
+        return super().is_hyperbolic(F, N) & (cofactor(np.asarray(F, dtype=float))[1] > 0.0)
