@@ -13,7 +13,7 @@ distributed scheduler instead (its workers need skdgmpm installed), so studies s
 machine; the returned executor is Dask's `concurrent.futures` adapter.
 """
 import os
-from concurrent.futures import Executor, Future, ProcessPoolExecutor
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 
 from .errors import InputError
 
@@ -30,6 +30,26 @@ class SerialExecutor(Executor):
                 raise
             future.set_exception(exc)
         return future
+
+
+def map_ordered(pool, fn, tasks, bar, labels=None):
+    """``fn(*task)`` for every task on ``pool``; the results in task order, ``bar`` advanced as
+    each run finishes (at submission on a serial executor, which runs it then). ``labels`` (one
+    per task) become the bar's description as the tasks are submitted."""
+    results, pending = [None] * len(tasks), {}
+    for k, task in enumerate(tasks):
+        if labels is not None:
+            bar.set_description(labels[k])
+        future = pool.submit(fn, *task)
+        if future.done():
+            results[k] = future.result()
+            bar.update(1)
+        else:
+            pending[future] = k
+    for future in as_completed(pending):
+        results[pending[future]] = future.result()
+        bar.update(1)
+    return results
 
 
 def make_executor(workers=None, dask=None, timeout="10s"):

@@ -96,7 +96,7 @@ def _line_values(snapshot, n):
 def compare(scene, groups=("S1", "S2", "dgmpm"), overrides=(), times=None, workers=None, dgmpm_cfl=0.5,
             progress=False):
     """Run every method of ``groups`` to every figure time; returns the `Snapshot` list."""
-    from .executor import make_executor
+    from .executor import make_executor, map_ordered
     from .run import progress_bar
     from .scene import load_scene
 
@@ -113,11 +113,7 @@ def compare(scene, groups=("S1", "S2", "dgmpm"), overrides=(), times=None, worke
                 tasks.append((str(s.path or scene), method, [*overrides, *extra], float(t), fields))
     bar = progress_bar(progress, len(tasks), desc=f"compare {s.name}", unit="run")
     with make_executor(workers) as pool:
-        futures = [pool.submit(_snapshot, *task) for task in tasks]
-        snaps = []
-        for f in futures:
-            snaps.append(f.result())
-            bar.update(1)
+        snaps = map_ordered(pool, _snapshot, tasks, bar)
     bar.close()
     return snaps
 

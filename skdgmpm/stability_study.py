@@ -152,17 +152,13 @@ def study(scene, methods=("dgmpm", "rk-dgfem/rk2 S1", "ader-dgfem S1T1", "ader-d
           limiters=("none", "barth-jespersen"), overrides=(), workers=None, lo=0.0, hi=2.0, tol=0.05,
           progress=False):
     """Critical CFL of every (method, limiter) chain of ``scene``, chains in parallel."""
-    from .executor import make_executor
+    from .executor import make_executor, map_ordered
     from .run import progress_bar
 
     todo = chains(scene, methods, limiters, overrides)
     bar = progress_bar(progress, len(todo), desc=f"cfl-limit {scene}", unit="chain")
     with make_executor(workers) as pool:
-        futures = [pool.submit(_chain_task, c, lo, hi, tol) for c in todo]
-        done = []
-        for f in futures:
-            done.append(f.result())
-            bar.update(1)
+        done = map_ordered(pool, _chain_task, [(c, lo, hi, tol) for c in todo], bar)
     bar.close()
     return done
 

@@ -91,28 +91,14 @@ def study_run(base, overrides, measure="l2", keep_fields=False):
 
 
 def _map(executor, tasks, progress, labels):
-    """Submit every task; results in task order, progress as they finish."""
-    from concurrent.futures import as_completed
-
-    from .executor import make_executor
+    """Every study run on ``executor`` (None: here, one after the other); results in task order."""
+    from .executor import make_executor, map_ordered
 
     own = executor is None
     pool = make_executor(1) if own else executor
     bar = progress_bar(progress, len(tasks), unit="run")
     try:
-        results, pending = [None] * len(tasks), {}
-        for k, (task, label) in enumerate(zip(tasks, labels)):
-            bar.set_description(label)
-            future = pool.submit(study_run, *task)
-            if future.done():                      # a serial executor ran it already
-                results[k] = future.result()
-                bar.update()
-            else:
-                pending[future] = k
-        for future in as_completed(pending):
-            results[pending[future]] = future.result()
-            bar.update()
-        return results
+        return map_ordered(pool, study_run, tasks, bar, labels)
     finally:
         bar.close()
         if own:
