@@ -51,14 +51,10 @@ def _cmd_stability(args):
 
 def _study(args, default_out):
     """Run the convergence study of ``converge``/``compare``; returns (rows, out folder)."""
-    from pathlib import Path
-
     from . import study
     from .executor import make_executor
 
-    out = Path(args.out if args.out is not None else default_out)
-    if out.exists() and any(out.iterdir()) and not args.force:
-        raise InputError(f"--out {out}: directory exists and is not empty (use --force to replace it)")
+    out = _out_dir(args, default_out)
     pool = make_executor(args.workers, dask=args.dask)
     try:
         rows = study.convergence(args.scene, [m for m in args.methods.split(",") if m],
@@ -159,6 +155,13 @@ def _cmd_compare_figures(args):
     return 0
 
 
+def _output_options(p, default):
+    """--out, --force and --quiet of the commands that write an output folder."""
+    p.add_argument("--out", default=None, help=f"output directory (default {default})")
+    p.add_argument("--force", action="store_true", help="replace an existing output directory")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="skdgmpm", description="DGMPM solver for impacts on solids")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -167,9 +170,7 @@ def main(argv=None):
     p.add_argument("case", help="scene name from cases/ (see 'skdgmpm list') or path to a .toml")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene key, e.g. --set method.cfl=0.5 (repeatable)")
-    p.add_argument("--out", default=None, help="output directory (default runs/CASE)")
-    p.add_argument("--force", action="store_true", help="replace an existing output directory")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _output_options(p, "runs/CASE")
     p.set_defaults(func=_cmd_run)
 
     for command, help_text, default_methods in (
@@ -200,9 +201,7 @@ def main(argv=None):
         p.add_argument("--dask", default=None, metavar="tcp://HOST:PORT",
                        help="run the study on this Dask distributed scheduler instead")
         p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene key")
-        p.add_argument("--out", default=None, help=f"output directory (default runs/{command}_SCENE)")
-        p.add_argument("--force", action="store_true", help="replace an existing output directory")
-        p.add_argument("--quiet", action="store_true", help="no progress bar")
+        _output_options(p, f"runs/{command}_SCENE")
         p.set_defaults(func=_cmd_converge if command == "converge" else _cmd_compare)
 
     p = sub.add_parser("bench", help="benchmark every method on a 2D neo-Hookean impact (set-up, "
@@ -227,9 +226,7 @@ def main(argv=None):
     p.add_argument("--workers", type=int, default=None, help="parallel processes (default: all cores; 1: serial)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene key, e.g. a coarse mesh: --set 'grid.mesh=\"lasat_12.msh\"'")
-    p.add_argument("--out", default=None, help="output directory (default runs/cfl_limit_SCENE)")
-    p.add_argument("--force", action="store_true", help="replace an existing output directory")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _output_options(p, "runs/cfl_limit_SCENE")
     p.set_defaults(func=_cmd_cfl_limit)
 
     p = sub.add_parser("compare-figures", help="sigma11 maps and bottom-line plots of several methods (PNG, CSV)")
@@ -238,9 +235,7 @@ def main(argv=None):
     p.add_argument("--dgmpm-cfl", type=float, default=0.5, help="CFL of first-order DGMPM (CTU, 1 ppc)")
     p.add_argument("--workers", type=int, default=None, help="parallel processes (default: all cores; 1: serial)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene key")
-    p.add_argument("--out", default=None, help="output directory (default runs/compare_SCENE)")
-    p.add_argument("--force", action="store_true", help="replace an existing output directory")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _output_options(p, "runs/compare_SCENE")
     p.set_defaults(func=_cmd_compare_figures)
 
     p = sub.add_parser("list", help="list the scenes")
