@@ -102,10 +102,10 @@ def _cmd_compare(args):
 
 
 def _cmd_bench(args):
-    from . import bench
+    from . import bench, study
 
     methods = [m for m in args.methods.split(",") if m] if args.methods != "all" else list(bench.METHODS)
-    sizes = __import__("skdgmpm.study", fromlist=["_int_list"])._int_list(args.sizes, "--sizes")
+    sizes = study._int_list(args.sizes, "--sizes")
     rows = bench.main(methods, sizes, steps=args.steps, warmup=args.warmup, json_path=args.json,
                       progress=not args.quiet)
     m = bench.machine()

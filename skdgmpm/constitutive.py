@@ -73,16 +73,3 @@ class MaterialSet:
             sel = index == k
             out[sel] = mat.cauchy(F3[sel])
         return out
-
-    def max_speed(self, F, index):
-        """(n,) fastest wave speed along the grid axes, and (n,) bool: hyperbolic along them
-        (acoustic tensor C_iaja positive definite) with J > 0."""
-        d = F.shape[1]
-        C = self.tangent(F, index)
-        rho = np.empty(len(F))
-        for k, mat in enumerate(self.materials):
-            rho[index == k] = mat.rho
-        omega = np.stack([eigvalsh_small(C[:, :, a, :, a]) for a in range(d)], axis=1)
-        ok = np.all(omega > 0, axis=(1, 2)) & (det_small(F) > 0)
-        speed = np.sqrt(np.clip(omega.max(axis=(1, 2)), 0.0, None) / rho)
-        return speed, ok
