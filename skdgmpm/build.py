@@ -158,7 +158,8 @@ def build(scene):
         raise InputError(f"{scene.where('method.cfl')} = {cfl!r} must be in (0, 2]")
     name = method.get("name", "dgmpm")
     integrators = {"dgmpm": ("euler", "rk2"), "rk-dgfem": INTEGRATORS}.get(name)
-    mpm_options = (("update", tuple(UPDATES)), ("shape", SHAPES)) if name == "mpm" else ()
+    mpm_options = ((("update", tuple(UPDATES)), ("shape", SHAPES), ("time_step", ("current", "bar")))
+                   if name == "mpm" else ())
     for key, choices in (("integrator", integrators), ("transverse", ("dcu", "ctu")), *mpm_options):
         # ADER methods are their own time integrator: a scene's integrator key is ignored
         if choices is not None and key in method and method[key] not in choices:
@@ -172,7 +173,7 @@ def build(scene):
                         transverse=method.get("transverse", "dcu"))
     elif name == "mpm":              # the whole background grid; integrator/transverse keys are ignored
         stepper = MPM(grid, particles, mats, bcs, cfl=cfl, update=method.get("update", "usl"),
-                      shape=method.get("shape", "cpgimp"))
+                      shape=method.get("shape", "cpgimp"), time_step_rule=method.get("time_step", "current"))
     else:
         order = method.get("order", 1)
         if not 1 <= order <= 5:

@@ -83,7 +83,9 @@ class MPM(GodunovScheme):
     bcs : list of (boundary name of ``grid.mesh``, BoundaryCondition); later entries override
         earlier ones on shared facets. Imposed velocities act on the grid's boundary nodes,
         tractions on the particles next to the loaded facets; transmissive is not supported.
-    cfl : Courant number, dt = cfl h_min / max_p(c_p + |v_p|)
+    cfl : Courant number, dt = cfl h_min / max_p(c_p + |v_p|) (``time_step="current"``) or the fixed
+        dt = cfl h_min / max sqrt(E / rho0) of WG08 (``time_step="bar"``: the bar wave speed of the
+        undeformed material, so the step does not shrink where a stiffening law is compressed)
     update : "usf" | "usl" | "cd" | "uvf"; shape : "hat" | "ugimp" | "cpgimp"
     body_force : None or callable b(X, t) -> (n, d) (m/s^2) at reference positions
     """
@@ -96,6 +98,7 @@ class MPM(GodunovScheme):
     update: str = "usl"
     shape: str = "cpgimp"
     body_force: object = None
+    time_step_rule: str = "current"
     external_work: float = field(default=0.0, init=False)
 
     def __post_init__(self):
@@ -103,6 +106,8 @@ class MPM(GodunovScheme):
             raise InputError(f"method.update = {self.update!r}: expected one of {', '.join(UPDATES)}")
         if self.shape not in SHAPES:
             raise InputError(f"method.shape = {self.shape!r}: expected one of {', '.join(SHAPES)}")
+        if self.time_step_rule not in ("current", "bar"):
+            raise InputError(f"method.time_step = {self.time_step_rule!r}: expected 'current' or 'bar'")
         self.variant = UPDATES[self.update]
         self.d = self.grid.dim
         self.lattice = Lattice.from_mesh(self.grid.mesh)
@@ -272,7 +277,11 @@ class MPM(GodunovScheme):
 
     # ---------------------------------------------------------------- driver-facing
     def time_step(self, state, dt_max=np.inf):
-        """dt = cfl h_min / max_p(c_p + |v_p|): waves and particles cross at most cfl cells."""
+        """dt = cfl h_min / max_p(c_p + |v_p|): waves and particles cross at most cfl cells; or
+        WG08's fixed dt = cfl h_min / sqrt(E / rho0)."""
+        if self.time_step_rule == "bar":
+            c = max(np.sqrt(m.E / m.rho) for m in self.materials.materials)
+            return min(self.cfl * self.h_min / c, dt_max)
         _, v = system.split(state.Q, self.d)
         return min(self.cfl * self.h_min / np.max(state.speed + np.linalg.norm(v, axis=1)), dt_max)
 

@@ -31,7 +31,8 @@ SCHEMA = {
     "boundaries": None,
     "bc": None,
     "method": {"name": str, "integrator": str, "transverse": str, "cfl": NUMBER, "order": int,
-               "mls_order": int, "backmap": str, "limiter": str, "update": str, "shape": str},
+               "mls_order": int, "backmap": str, "limiter": str, "update": str, "shape": str,
+               "time_step": str},
     "run": {"t_end": NUMBER, "frames": int},
     "exact": None,
     "figures": {"times": list, "fields": list},     # paper times and fields of `skdgmpm compare-figures`

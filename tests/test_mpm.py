@@ -146,6 +146,7 @@ def test_particle_leaving_the_grid_stops_the_run_naming_it():
 @pytest.mark.parametrize("override, message", [
     ('method.update="usx"', "method.update = 'usx': expected one of usf, usl, cd, uvf"),
     ('method.shape="bspline"', "method.shape = 'bspline': expected one of hat, ugimp, cpgimp"),
+    ('method.time_step="cfl"', "method.time_step = 'cfl': expected one of current, bar"),
     ('bc.right={kind = "transmissive"}', "bc.right: kind = 'transmissive' is not supported by mpm"),
     ('bc.surface={kind = "free"}', "bc.surface: no boundary of that name in the background grid"),
 ])
