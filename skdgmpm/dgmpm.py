@@ -19,7 +19,7 @@ from . import system
 from .errors import InputError
 from .faces import interior_faces
 from .quadrature import ParticleMap, VolumeOperators, interpolation_matrix, particle_basis
-from .riemann import transverse_positive
+from .riemann import transverse_fluxes
 from .scheme import GodunovScheme, GridState, cell_values
 
 
@@ -72,8 +72,9 @@ class DGMPM(GodunovScheme):
 
     # ---------------------------------------------------------------- set-up
     def _setup_transverse(self):
-        """CTU topology: for each face and side, the source cell's two edges adjacent to the face,
-        with their outward normals and their index among interior or boundary faces."""
+        """CTU topology: for each face and side, the source cell's two edges adjacent to the face
+        (axis 0 of the (2, nf) arrays), with their outward normals and their index among interior
+        faces (with the sign of the interior normal) or boundary faces (-1 where not one)."""
         self.ctu = None
         if self.transverse != "ctu" or self.d != 2:
             return
@@ -87,16 +88,13 @@ class DGMPM(GodunovScheme):
             sides = (("L", faces.cell_L), ("R", faces.cell_R)) if kind == "interior" else (("L", faces.cell_L),)
             for side, cells in sides:
                 k = np.argmax(m.t2f[:, cells] == faces.facets[None, :], axis=0)
-                edges = []
-                for shift in (1, 3):
-                    j = m.t2f[(k + shift) % 4, cells]
-                    j_int, j_bnd = pos_int[j], pos_bnd[j]
-                    sign = np.where(self.interior.cell_L[j_int] == cells, 1.0, -1.0)
-                    n = np.where((j_int >= 0)[:, None], sign[:, None] * self.interior.normal[j_int],
-                                 self.boundary.normal[j_bnd])
-                    edges.append((j_int, j_bnd, sign, n))
+                j = m.t2f[(k[None, :] + np.array([1, 3])[:, None]) % 4, cells[None, :]]     # (2, nf)
+                j_int, j_bnd = pos_int[j], pos_bnd[j]
+                sign = np.where(self.interior.cell_L[j_int] == cells, 1.0, -1.0)
+                n = np.where((j_int >= 0)[..., None], sign[..., None] * self.interior.normal[j_int],
+                             self.boundary.normal[j_bnd])
                 h = self.cell_volume[cells] / faces.measure
-                self.ctu.append((kind, side, h, edges))
+                self.ctu.append((kind, side, h, (n, j_int, j_bnd, sign)))
         frame = np.zeros((len(self.boundary), 2, 2))
         free_v = np.zeros((len(self.boundary), 2), bool)
         free_t = np.zeros((len(self.boundary), 2), bool)
@@ -131,20 +129,12 @@ class DGMPM(GodunovScheme):
         corr_bnd = np.zeros_like(boundary.flux)
         if self.ctu is None:
             return corr_int, corr_bnd
-        d = self.d
-        for kind, side, h, edges in self.ctu:
+        for kind, side, h, (n, j_int, j_bnd, sign) in self.ctu:
             fs = interior if kind == "interior" else boundary
             w = fs.fluct_L if side == "L" else fs.fluct_R
             C = fs.C_L if side == "L" else fs.C_R
             rho = fs.rho_L if side == "L" else fs.rho_R
-            w_F, w_p = system.split(w, d)
-            G = [-(dt / (2.0 * h))[:, None] * system.join(*transverse_positive(w_F, w_p, C, n, rho))
-                 for _, _, _, n in edges]
-            for e, (j_int, j_bnd, sign, _) in enumerate(edges):
-                ok = j_int >= 0
-                np.add.at(corr_int, j_int[ok], sign[ok, None] * G[e][ok])
-                ok = j_bnd >= 0
-                np.add.at(corr_bnd, j_bnd[ok], (G[e] - G[1 - e])[ok])
+            transverse_fluxes(w, C, rho, -dt / (2.0 * h), n, j_int, j_bnd, sign, corr_int, corr_bnd)
         return corr_int, self._free_part(corr_bnd)
 
     def _free_part(self, flux):

@@ -9,71 +9,244 @@ linearisation) and the right-going waves (side R's) traction t = P N and velocit
 so the stationary state is v* = (Z_L + Z_R)^-1 (t_R - t_L + Z_L v_L + Z_R v_R). The flux, linear in
 Q, needs only (t*, v*). All functions are batched over faces: traction and velocity (nf, d),
 impedances (nf, d, d), tangents C (nf, d, d, d, d).
+
+Each quantity is one compiled point function (numba) looped over the faces inside the compiled
+code: a face costs a few hundred flops, far below numpy's per-call overhead on (d, d) axes. The
+batched functions and the fused face and CTU kernels call the same point functions.
 """
 import numpy as np
+from numba import njit
 from scipy.linalg import null_space
 
 from .errors import InstabilityError
 
 
-def acoustic_tensor(C, N):
-    """A_ij = C_iajb N_a N_b: (nf, d, d), as a batch of (d*d, d*d) @ (d*d,) products (several
-    times faster than einsum on these tiny axes)."""
-    nf, d = N.shape
-    Ct = C.transpose(0, 1, 3, 2, 4).reshape(nf, d * d, d * d)              # (f, ij, ab)
-    return np.matmul(Ct, (N[:, :, None] * N[:, None, :]).reshape(nf, d * d, 1)).reshape(nf, d, d)
-
-
-def _not_hyperbolic(bad):
-    face = int(np.flatnonzero(bad)[0])
+def _not_hyperbolic(face):
     raise InstabilityError(f"loss of hyperbolicity: acoustic tensor not positive definite at face {face}")
 
 
-def impedance(C, N, rho0, inverse=False):
-    """Z = sqrt(rho0 A_N) (or its inverse), (nf, d, d); fails loudly where A_N is not positive.
+# ---------------------------------------------------------------- point functions (one face)
+@njit(cache=True)
+def _acoustic(C, n, rho, M):
+    """M_ij = rho C_iajb n_a n_b into M (d, d)."""
+    d = n.shape[0]
+    for i in range(d):
+        for j in range(d):
+            s = 0.0
+            for a in range(d):
+                for b in range(d):
+                    s += C[i, a, j, b] * (n[a] * n[b])
+            M[i, j] = rho * s
 
-    d = 1, 2 in closed form (sqrt(M) = (M + s I) / sqrt(tr M + 2 s), s = sqrt(det M)),
-    otherwise by eigen-decomposition.
-    """
+
+@njit(cache=True)
+def _sqrt_spd(M, Z, Zi):
+    """Z = sqrt(M) and Zi = Z^-1 for a symmetric (d, d) M; False where M is not positive definite.
+    d = 1, 2 in closed form (sqrt(M) = (M + s I) / sqrt(tr M + 2 s), s = sqrt(det M)), otherwise
+    by eigen-decomposition."""
+    d = M.shape[0]
+    if d == 1:
+        if not M[0, 0] > 0:
+            return False
+        Z[0, 0] = np.sqrt(M[0, 0])
+        Zi[0, 0] = 1.0 / Z[0, 0]
+        return True
+    if d == 2:
+        det = M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
+        tr = M[0, 0] + M[1, 1]
+        if not (det > 0 and tr > 0):
+            return False
+        s = np.sqrt(det)
+        q = np.sqrt(tr + 2 * s)
+        Z[0, 0], Z[0, 1], Z[1, 0], Z[1, 1] = (M[0, 0] + s) / q, M[0, 1] / q, M[1, 0] / q, (M[1, 1] + s) / q
+        det_Z = Z[0, 0] * Z[1, 1] - Z[0, 1] * Z[1, 0]
+        Zi[0, 0], Zi[0, 1], Zi[1, 0], Zi[1, 1] = Z[1, 1] / det_Z, -Z[0, 1] / det_Z, -Z[1, 0] / det_Z, Z[0, 0] / det_Z
+        return True
+    omega, Y = np.linalg.eigh(M)
+    if not np.all(omega > 0):
+        return False
+    z = np.sqrt(omega)
+    for i in range(d):
+        for j in range(d):
+            Z[i, j] = np.sum(Y[i] * z * Y[j])
+            Zi[i, j] = np.sum(Y[i] / z * Y[j])
+    return True
+
+
+@njit(cache=True)
+def _solve(A, b, x):
+    """x = A^-1 b for a small (d, d) A by Gaussian elimination with partial pivoting (A, b are
+    overwritten)."""
+    d = b.shape[0]
+    for k in range(d):
+        p = k
+        for r in range(k + 1, d):
+            if abs(A[r, k]) > abs(A[p, k]):
+                p = r
+        for c in range(d):
+            A[k, c], A[p, c] = A[p, c], A[k, c]
+        b[k], b[p] = b[p], b[k]
+        for r in range(k + 1, d):
+            m = A[r, k] * (1.0 / A[k, k])                # as LAPACK getrf: same round-off
+            for c in range(k, d):
+                A[r, c] -= m * A[k, c]
+            b[r] -= m * b[k]
+    for k in range(d - 1, -1, -1):
+        s = b[k]
+        for c in range(d - 1, k, -1):
+            s -= A[k, c] * x[c]
+        x[k] = s / A[k, k]
+
+
+@njit(cache=True)
+def _godunov(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s, A, b):
+    """(t*, v*) of one face into t_s, v_s; A (d, d) and b (d,) are scratch."""
+    d = v_L.shape[0]
+    for i in range(d):
+        zv_L, zv_R = 0.0, 0.0
+        for j in range(d):
+            zv_L += Z_L[i, j] * v_L[j]
+            zv_R += Z_R[i, j] * v_R[j]
+            A[i, j] = Z_L[i, j] + Z_R[i, j]
+        b[i] = t_R[i] - t_L[i] + zv_L + zv_R
+    _solve(A, b, v_s)
+    for i in range(d):
+        s = 0.0
+        for j in range(d):
+            s += Z_L[i, j] * (v_s[j] - v_L[j])
+        t_s[i] = t_L[i] + s
+
+
+@njit(cache=True)
+def _transverse_positive(w, C, n, rho, out, M, Z, Zi, g):
+    """B+_n w of one face into out (d*d + d,) (see `transverse_positive`); M, Z, Zi (d, d) and
+    g (d,) are scratch. False where the acoustic tensor along n is not positive definite."""
+    d = n.shape[0]
+    for i in range(d):                                   # g = (C : w_F) n
+        s = 0.0
+        for a in range(d):
+            cw = 0.0
+            for j in range(d):
+                for b in range(d):
+                    cw += C[i, a, j, b] * w[j * d + b]
+            s += cw * n[a]
+        g[i] = s
+    _acoustic(C, n, rho, M)
+    if not _sqrt_spd(M, Z, Zi):
+        return False
+    for i in range(d):
+        zg, zw = 0.0, 0.0
+        for j in range(d):
+            zg += Zi[i, j] * g[j]
+            zw += Z[i, j] * w[d * d + j]
+        a_i = 0.5 * (zg - w[d * d + i] / rho)
+        for a in range(d):
+            out[i * d + a] = a_i * n[a]
+        out[d * d + i] = -0.5 * g[i] + 0.5 * zw / rho
+    return True
+
+
+# ---------------------------------------------------------------- loops over faces
+@njit(cache=True)
+def _impedances(C, N, rho, Z, Zi):
+    d = N.shape[1]
+    M = np.empty((d, d))
+    for f in range(len(N)):
+        _acoustic(C[f], N[f], rho[f], M)
+        if not _sqrt_spd(M, Z[f], Zi[f]):
+            return f
+    return -1
+
+
+@njit(cache=True)
+def _godunov_states(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s):
+    d = v_L.shape[1]
+    A, b = np.empty((d, d)), np.empty(d)
+    for f in range(len(v_L)):
+        _godunov(t_L[f], v_L[f], t_R[f], v_R[f], Z_L[f], Z_R[f], t_s[f], v_s[f], A, b)
+
+
+@njit(cache=True)
+def _godunov_faces(t_L, v_L, C_L, rho_L, t_R, v_R, C_R, rho_R, N, Z_L, t_s, v_s):
+    d = N.shape[1]
+    M, Z_R, Zi, A, b = np.empty((d, d)), np.empty((d, d)), np.empty((d, d)), np.empty((d, d)), np.empty(d)
+    for f in range(len(N)):
+        _acoustic(C_L[f], N[f], rho_L[f], M)
+        if not _sqrt_spd(M, Z_L[f], Zi):
+            return f
+        _acoustic(C_R[f], N[f], rho_R[f], M)
+        if not _sqrt_spd(M, Z_R, Zi):
+            return f
+        _godunov(t_L[f], v_L[f], t_R[f], v_R[f], Z_L[f], Z_R, t_s[f], v_s[f], A, b)
+    return -1
+
+
+@njit(cache=True)
+def _transverse_positives(w, C, n, rho, out):
+    d = n.shape[1]
+    M, Z, Zi, g = np.empty((d, d)), np.empty((d, d)), np.empty((d, d)), np.empty(d)
+    for f in range(len(n)):
+        if not _transverse_positive(w[f], C[f], n[f], rho[f], out[f], M, Z, Zi, g):
+            return f
+    return -1
+
+
+@njit(cache=True)
+def _transverse_scatter(w, C, rho, scale, normals, edge_int, edge_bnd, sign, corr_int, corr_bnd):
+    nf, nc = w.shape
+    d = normals.shape[2]
+    M, Z, Zi, g, G = np.empty((d, d)), np.empty((d, d)), np.empty((d, d)), np.empty(d), np.empty((2, nc))
+    for f in range(nf):
+        for e in range(2):
+            if not _transverse_positive(w[f], C[f], normals[e, f], rho[f], G[e], M, Z, Zi, g):
+                return f
+            for k in range(nc):
+                G[e, k] *= scale[f]
+        for e in range(2):
+            j = edge_int[e, f]
+            if j >= 0:
+                for k in range(nc):
+                    corr_int[j, k] += sign[e, f] * G[e, k]
+            j = edge_bnd[e, f]
+            if j >= 0:
+                for k in range(nc):
+                    corr_bnd[j, k] += G[e, k] - G[1 - e, k]
+    return -1
+
+
+# ---------------------------------------------------------------- batched over faces
+def impedance(C, N, rho0, inverse=False):
+    """Z = sqrt(rho0 A_N) (or its inverse), (nf, d, d); fails loudly where A_N is not positive."""
     Z, Zinv = impedances(C, N, rho0)
     return Zinv if inverse else Z
 
 
 def impedances(C, N, rho0):
     """Z = sqrt(rho0 A_N) and its inverse, (nf, d, d) each, from one decomposition."""
-    M = rho0[:, None, None] * acoustic_tensor(C, N)
-    d = M.shape[1]
-    if d == 1:
-        if not np.all(M > 0):
-            _not_hyperbolic(M[:, 0, 0] <= 0)
-        Z = np.sqrt(M)
-        return Z, 1.0 / Z
-    if d == 2:
-        det = M[:, 0, 0] * M[:, 1, 1] - M[:, 0, 1] * M[:, 1, 0]
-        tr = M[:, 0, 0] + M[:, 1, 1]
-        if not np.all((det > 0) & (tr > 0)):
-            _not_hyperbolic(~((det > 0) & (tr > 0)))
-        s = np.sqrt(det)
-        Z = (M + s[:, None, None] * np.eye(2)) / np.sqrt(tr + 2 * s)[:, None, None]
-        adj = np.empty_like(Z)
-        adj[:, 0, 0], adj[:, 0, 1], adj[:, 1, 0], adj[:, 1, 1] = Z[:, 1, 1], -Z[:, 0, 1], -Z[:, 1, 0], Z[:, 0, 0]
-        return Z, adj / (Z[:, 0, 0] * Z[:, 1, 1] - Z[:, 0, 1] * Z[:, 1, 0])[:, None, None]
-    omega, Y = np.linalg.eigh(M)
-    if not np.all(omega > 0):
-        _not_hyperbolic(np.any(omega <= 0, axis=1))
-    z = np.sqrt(omega)
-    return np.einsum("fik,fk,fjk->fij", Y, z, Y), np.einsum("fik,fk,fjk->fij", Y, 1.0 / z, Y)
-
-
-def _matvec(A, x):
-    return np.einsum("fij,fj->fi", A, x)
+    nf, d = N.shape
+    Z, Zinv = np.empty((nf, d, d)), np.empty((nf, d, d))
+    bad = _impedances(C, N, np.asarray(rho0, dtype=float), Z, Zinv)
+    if bad >= 0:
+        _not_hyperbolic(bad)
+    return Z, Zinv
 
 
 def godunov_state(t_L, v_L, t_R, v_R, Z_L, Z_R):
     """Stationary traction and velocity (t*, v*) of the linearised Riemann problem."""
-    rhs = t_R - t_L + _matvec(Z_L, v_L) + _matvec(Z_R, v_R)
-    v = np.linalg.solve(Z_L + Z_R, rhs[..., None])[..., 0]
-    return t_L + _matvec(Z_L, v - v_L), v
+    t_s, v_s = np.empty_like(t_L), np.empty_like(v_L)
+    _godunov_states(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s)
+    return t_s, v_s
+
+
+def godunov_faces(t_L, v_L, C_L, rho_L, t_R, v_R, C_R, rho_R, N):
+    """`godunov_state` from the two sides' linearisations (tangents C, densities rho) in one pass:
+    returns t*, v* (nf, d) and side L's impedance Z_L (nf, d, d)."""
+    nf, d = N.shape
+    Z_L, t_s, v_s = np.empty((nf, d, d)), np.empty((nf, d)), np.empty((nf, d))
+    bad = _godunov_faces(t_L, v_L, C_L, rho_L, t_R, v_R, C_R, rho_R, N, Z_L, t_s, v_s)
+    if bad >= 0:
+        _not_hyperbolic(bad)
+    return t_s, v_s, Z_L
 
 
 def godunov_state_eigen(P_L, v_L, P_R, v_R, C_L, C_R, rho_L, rho_R, N):
@@ -125,8 +298,24 @@ def transverse_positive(w_F, w_p, C, n, rho0):
     B+ w = [ (Z^-1 g - w_p / rho0) / 2 (x) n ;  -g / 2 + Z w_p / (2 rho0) ].
     """
     nf, d = n.shape
-    Cw = np.matmul(C.reshape(nf, d * d, d * d), w_F.reshape(nf, d * d, 1)).reshape(nf, d, d)   # C : w_F
-    g = np.matmul(Cw, n[:, :, None])[:, :, 0]
-    Z, Zinv = impedances(C, n, rho0)
-    a = 0.5 * (_matvec(Zinv, g) - w_p / rho0[:, None])
-    return a[:, :, None] * n[:, None, :], -0.5 * g + 0.5 * _matvec(Z, w_p) / rho0[:, None]
+    w = np.concatenate([w_F.reshape(nf, d * d), w_p], axis=1)
+    out = np.empty_like(w)
+    bad = _transverse_positives(w, C, n, np.asarray(rho0, dtype=float), out)
+    if bad >= 0:
+        _not_hyperbolic(bad)
+    return out[:, : d * d].reshape(nf, d, d), out[:, d * d:]
+
+
+def transverse_fluxes(w, C, rho0, scale, normals, edge_int, edge_bnd, sign, corr_int, corr_bnd):
+    """Accumulate the transverse (CTU) flux corrections of one face side in place.
+
+    For every face f, the fluctuation w[f] (nc,) entering a cell is split along the normals
+    ``normals[e, f]`` (2, nf, d) of the cell's two edges e adjacent to the face, G_e =
+    scale[f] B+_n w[f]. ``corr_int[edge_int[e, f]] += sign[e, f] G_e`` where the edge is interior
+    (index >= 0), and ``corr_bnd[edge_bnd[e, f]] += G_e - G_(1-e)`` where it is a boundary edge
+    (the ghost cell, a copy of the cell, sends back the opposite edge's correction).
+    """
+    bad = _transverse_scatter(w, C, np.asarray(rho0, dtype=float), scale, normals, edge_int, edge_bnd, sign,
+                              corr_int, corr_bnd)
+    if bad >= 0:
+        _not_hyperbolic(bad)

@@ -15,7 +15,7 @@ from .bcs import FREE
 from .errors import InputError, InstabilityError
 from .faces import boundary_faces
 from .health import assess
-from .riemann import godunov_state, impedance
+from .riemann import godunov_faces, impedance
 
 
 @dataclass
@@ -140,8 +140,7 @@ class GodunovScheme:
         f = self.interior
         t_L, v_L, C_L, rho_L, _ = self._side(f, self.face_operator(f, "L"), grid_state, f.cell_L)
         t_R, v_R, C_R, rho_R, _ = self._side(f, self.face_operator(f, "R"), grid_state, f.cell_R)
-        Z_L, Z_R = impedance(C_L, f.normal, rho_L), impedance(C_R, f.normal, rho_R)
-        t_s, v_s = godunov_state(t_L, v_L, t_R, v_R, Z_L, Z_R)
+        t_s, v_s, Z_L = godunov_faces(t_L, v_L, C_L, rho_L, t_R, v_R, C_R, rho_R, f.normal)
         flux = system.normal_flux(t_s, v_s, f.normal)
         fs = FaceStates(t_L, v_L, C_L, rho_L, Z_L, flux,
                         fluct_L=flux - system.normal_flux(t_L, v_L, f.normal),
