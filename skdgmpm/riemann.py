@@ -26,7 +26,7 @@ def _not_hyperbolic(face):
 
 
 # ---------------------------------------------------------------- point functions (one face)
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _acoustic(C, n, rho, M):
     """M_ij = rho C_iajb n_a n_b into M (d, d)."""
     d = n.shape[0]
@@ -39,11 +39,26 @@ def _acoustic(C, n, rho, M):
             M[i, j] = rho * s
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def _sqrt_spd2(m00, m01, m10, m11):
+    """sqrt(M) = (M + s I) / sqrt(tr M + 2 s), s = sqrt(det M), and its inverse for a symmetric
+    2 x 2 M: (ok, Z00, Z01, Z10, Z11, Zi00, Zi01, Zi10, Zi11), ok False where M is not positive
+    definite (scalars, so the 2D kernels keep them in registers)."""
+    det = m00 * m11 - m01 * m10
+    tr = m00 + m11
+    if not (det > 0 and tr > 0):
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    s = np.sqrt(det)
+    q = np.sqrt(tr + 2 * s)
+    z00, z01, z10, z11 = (m00 + s) / q, m01 / q, m10 / q, (m11 + s) / q
+    det_z = z00 * z11 - z01 * z10
+    return True, z00, z01, z10, z11, z11 / det_z, -z01 / det_z, -z10 / det_z, z00 / det_z
+
+
+@njit(cache=True, inline="always")
 def _sqrt_spd(M, Z, Zi):
     """Z = sqrt(M) and Zi = Z^-1 for a symmetric (d, d) M; False where M is not positive definite.
-    d = 1, 2 in closed form (sqrt(M) = (M + s I) / sqrt(tr M + 2 s), s = sqrt(det M)), otherwise
-    by eigen-decomposition."""
+    d = 1, 2 in closed form, otherwise by eigen-decomposition."""
     d = M.shape[0]
     if d == 1:
         if not M[0, 0] > 0:
@@ -52,16 +67,9 @@ def _sqrt_spd(M, Z, Zi):
         Zi[0, 0] = 1.0 / Z[0, 0]
         return True
     if d == 2:
-        det = M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0]
-        tr = M[0, 0] + M[1, 1]
-        if not (det > 0 and tr > 0):
-            return False
-        s = np.sqrt(det)
-        q = np.sqrt(tr + 2 * s)
-        Z[0, 0], Z[0, 1], Z[1, 0], Z[1, 1] = (M[0, 0] + s) / q, M[0, 1] / q, M[1, 0] / q, (M[1, 1] + s) / q
-        det_Z = Z[0, 0] * Z[1, 1] - Z[0, 1] * Z[1, 0]
-        Zi[0, 0], Zi[0, 1], Zi[1, 0], Zi[1, 1] = Z[1, 1] / det_Z, -Z[0, 1] / det_Z, -Z[1, 0] / det_Z, Z[0, 0] / det_Z
-        return True
+        ok, Z[0, 0], Z[0, 1], Z[1, 0], Z[1, 1], Zi[0, 0], Zi[0, 1], Zi[1, 0], Zi[1, 1] = _sqrt_spd2(
+            M[0, 0], M[0, 1], M[1, 0], M[1, 1])
+        return ok
     omega, Y = np.linalg.eigh(M)
     if not np.all(omega > 0):
         return False
@@ -73,7 +81,7 @@ def _sqrt_spd(M, Z, Zi):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _solve(A, b, x):
     """x = A^-1 b for a small (d, d) A by Gaussian elimination with partial pivoting (A, b are
     overwritten)."""
@@ -98,7 +106,7 @@ def _solve(A, b, x):
         x[k] = s / A[k, k]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _godunov(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s, A, b):
     """(t*, v*) of one face into t_s, v_s; A (d, d) and b (d,) are scratch."""
     d = v_L.shape[0]
@@ -117,32 +125,34 @@ def _godunov(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s, A, b):
         t_s[i] = t_L[i] + s
 
 
-@njit(cache=True)
-def _transverse_positive(w, C, n, rho, out, M, Z, Zi, g):
-    """B+_n w of one face into out (d*d + d,) (see `transverse_positive`); M, Z, Zi (d, d) and
-    g (d,) are scratch. False where the acoustic tensor along n is not positive definite."""
-    d = n.shape[0]
-    for i in range(d):                                   # g = (C : w_F) n
-        s = 0.0
-        for a in range(d):
-            cw = 0.0
-            for j in range(d):
-                for b in range(d):
-                    cw += C[i, a, j, b] * w[j * d + b]
-            s += cw * n[a]
-        g[i] = s
-    _acoustic(C, n, rho, M)
-    if not _sqrt_spd(M, Z, Zi):
+@njit(cache=True, inline="always")
+def _acoustic2(C, i, j, n0, n1):
+    """A_ij = C_iajb n_a n_b in 2D, summed as `_acoustic` does."""
+    return C[i, 0, j, 0] * (n0 * n0) + C[i, 0, j, 1] * (n0 * n1) + C[i, 1, j, 0] * (n1 * n0) + C[i, 1, j, 1] * (n1 * n1)
+
+
+@njit(cache=True, inline="always")
+def _transverse_positive(w, C, n0, n1, rho, scale, out):
+    """scale B+_n w of one face into out (6,) (see `transverse_positive`), 2D only (the CTU
+    corrections are 2D): w (6,), C (2, 2, 2, 2), n = (n0, n1). False where the acoustic tensor
+    along n is not positive definite."""
+    n = (n0, n1)
+    g0, g1 = 0.0, 0.0                                    # g = (C : w_F) n
+    for a in range(2):
+        cw0 = C[0, a, 0, 0] * w[0] + C[0, a, 0, 1] * w[1] + C[0, a, 1, 0] * w[2] + C[0, a, 1, 1] * w[3]
+        cw1 = C[1, a, 0, 0] * w[0] + C[1, a, 0, 1] * w[1] + C[1, a, 1, 0] * w[2] + C[1, a, 1, 1] * w[3]
+        g0 += cw0 * n[a]
+        g1 += cw1 * n[a]
+    ok, z00, z01, z10, z11, i00, i01, i10, i11 = _sqrt_spd2(
+        rho * _acoustic2(C, 0, 0, n0, n1), rho * _acoustic2(C, 0, 1, n0, n1),
+        rho * _acoustic2(C, 1, 0, n0, n1), rho * _acoustic2(C, 1, 1, n0, n1))
+    if not ok:
         return False
-    for i in range(d):
-        zg, zw = 0.0, 0.0
-        for j in range(d):
-            zg += Zi[i, j] * g[j]
-            zw += Z[i, j] * w[d * d + j]
-        a_i = 0.5 * (zg - w[d * d + i] / rho)
-        for a in range(d):
-            out[i * d + a] = a_i * n[a]
-        out[d * d + i] = -0.5 * g[i] + 0.5 * zw / rho
+    a0 = 0.5 * ((i00 * g0 + i01 * g1) - w[4] / rho)
+    a1 = 0.5 * ((i10 * g0 + i11 * g1) - w[5] / rho)
+    out[0], out[1], out[2], out[3] = scale * (a0 * n0), scale * (a0 * n1), scale * (a1 * n0), scale * (a1 * n1)
+    out[4] = scale * (-0.5 * g0 + 0.5 * (z00 * w[4] + z01 * w[5]) / rho)
+    out[5] = scale * (-0.5 * g1 + 0.5 * (z10 * w[4] + z11 * w[5]) / rho)
     return True
 
 
@@ -183,25 +193,20 @@ def _godunov_faces(t_L, v_L, C_L, rho_L, t_R, v_R, C_R, rho_R, N, Z_L, t_s, v_s)
 
 @njit(cache=True)
 def _transverse_positives(w, C, n, rho, out):
-    d = n.shape[1]
-    M, Z, Zi, g = np.empty((d, d)), np.empty((d, d)), np.empty((d, d)), np.empty(d)
     for f in range(len(n)):
-        if not _transverse_positive(w[f], C[f], n[f], rho[f], out[f], M, Z, Zi, g):
+        if not _transverse_positive(w[f], C[f], n[f, 0], n[f, 1], rho[f], 1.0, out[f]):
             return f
     return -1
 
 
 @njit(cache=True)
 def _transverse_scatter(w, C, rho, scale, normals, edge_int, edge_bnd, sign, corr_int, corr_bnd):
-    nf, nc = w.shape
-    d = normals.shape[2]
-    M, Z, Zi, g, G = np.empty((d, d)), np.empty((d, d)), np.empty((d, d)), np.empty(d), np.empty((2, nc))
-    for f in range(nf):
+    nc = w.shape[1]
+    G = np.empty((2, nc))
+    for f in range(len(w)):
         for e in range(2):
-            if not _transverse_positive(w[f], C[f], normals[e, f], rho[f], G[e], M, Z, Zi, g):
+            if not _transverse_positive(w[f], C[f], normals[e, f, 0], normals[e, f, 1], rho[f], scale[f], G[e]):
                 return f
-            for k in range(nc):
-                G[e, k] *= scale[f]
         for e in range(2):
             j = edge_int[e, f]
             if j >= 0:
