@@ -6,19 +6,6 @@ import numpy as np
 from .system import embed
 
 
-def eigvalsh_small(A):
-    """Eigenvalues (ascending) of symmetric (n, d, d) matrices; closed form for d <= 2 (the
-    per-step check of every particle), LAPACK otherwise."""
-    d = A.shape[-1]
-    if d == 1:
-        return A[..., 0, :].copy()
-    if d == 2:
-        m = 0.5 * (A[..., 0, 0] + A[..., 1, 1])
-        r = np.hypot(0.5 * (A[..., 0, 0] - A[..., 1, 1]), 0.5 * (A[..., 0, 1] + A[..., 1, 0]))
-        return np.stack([m - r, m + r], axis=-1)
-    return np.linalg.eigvalsh(A)
-
-
 def det_small(F):
     """det of (n, d, d) matrices; closed form for d <= 2."""
     d = F.shape[-1]

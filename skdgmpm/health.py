@@ -9,9 +9,11 @@ The fastest wave *along the grid axes* sets the time step (unchanged: Delta t = 
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from . import system
-from .constitutive import det_small, eigvalsh_small
+from .constitutive import det_small
+from .riemann import _acoustic
 
 
 def directions(d):
@@ -70,6 +72,32 @@ class Health:
                    f"{self.omega[p]:.6g} Pa")
 
 
+@njit(cache=True)
+def _acoustic_extremes(C, N, n_axes, lowest, highest):
+    """Eigenvalues of the symmetrised acoustic tensors of every point (C (n, d, d, d, d)) along
+    the directions N (n_dir, d): the smallest over all of them into ``lowest`` (n,), the largest
+    over the first ``n_axes`` into ``highest`` (n,). Closed form for d <= 2, LAPACK otherwise."""
+    d = N.shape[1]
+    A = np.empty((d, d))
+    for p in range(C.shape[0]):
+        lo, hi = np.inf, -np.inf
+        for k in range(N.shape[0]):
+            _acoustic(C[p], N[k], 1.0, A)
+            if d == 1:
+                small = large = A[0, 0]
+            elif d == 2:
+                m = 0.5 * (A[0, 0] + A[1, 1])
+                r = np.hypot(0.5 * (A[0, 0] - A[1, 1]), 0.5 * (A[0, 1] + A[1, 0]))
+                small, large = m - r, m + r
+            else:
+                omega = np.linalg.eigvalsh(0.5 * (A + A.T))
+                small, large = omega[0], omega[-1]
+            lo = min(lo, small)
+            if k < n_axes:
+                hi = max(hi, large)
+        lowest[p], highest[p] = lo, hi
+
+
 def assess(materials, points, U, Q):
     """`Health` of the state (U, Q) at ``points`` (with ``material``, ``rho0``) for a `MaterialSet`."""
     n, nc = U.shape
@@ -79,12 +107,8 @@ def assess(materials, points, U, Q):
     F = np.where(finite[:, None, None], F, np.eye(d))
     J = det_small(F)
     C = materials.tangent(F, points.material)                           # (n, d, d, d, d)
-    N = directions(d)
-    # A[n, k] = C_iajb N_ka N_kb as one matrix product (n i j, a b) x (a b, k)
-    Ct = C.transpose(0, 1, 3, 2, 4).reshape(-1, d * d)
-    A = (Ct @ (N[:, :, None] * N[:, None, :]).reshape(len(N), d * d).T).reshape(n, d, d, -1).transpose(0, 3, 1, 2)
-    omega = eigvalsh_small(0.5 * (A + np.swapaxes(A, -1, -2)))           # (n, n_dir, d)
+    lowest, highest = np.empty(n), np.empty(n)
+    _acoustic_extremes(C, directions(d), d, lowest, highest)
     rho = np.array([m.rho for m in materials.materials])[points.material]
-    speed = np.sqrt(np.clip(omega[:, :d].max(axis=(1, 2)), 0.0, None) / rho)
-    omega_min = np.where(finite, omega.min(axis=(1, 2)), np.nan)
-    return Health(finite, np.where(finite, J, 1.0), omega_min, speed)
+    speed = np.sqrt(np.clip(highest, 0.0, None) / rho)
+    return Health(finite, np.where(finite, J, 1.0), np.where(finite, lowest, np.nan), speed)
