@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from numbers import Real
 
 import numpy as np
+from numba import njit
 
 from skdgmpm.errors import InputError
 
@@ -35,18 +36,26 @@ def _check_parameter(name, value, lower, upper):
         raise InputError(f"material: {name} = {value!r} must be a finite number {bounds}")
 
 
+@njit(cache=True)
+def _cofactor(F, cof, J):
+    for p in range(len(F)):
+        a, b, c = F[p, 0, 0], F[p, 0, 1], F[p, 0, 2]
+        d, e, f = F[p, 1, 0], F[p, 1, 1], F[p, 1, 2]
+        g, h, i = F[p, 2, 0], F[p, 2, 1], F[p, 2, 2]
+        cof[p, 0, 0], cof[p, 0, 1], cof[p, 0, 2] = e * i - f * h, f * g - d * i, d * h - e * g
+        cof[p, 1, 0], cof[p, 1, 1], cof[p, 1, 2] = c * h - b * i, a * i - c * g, b * g - a * h
+        cof[p, 2, 0], cof[p, 2, 1], cof[p, 2, 2] = b * f - c * e, c * d - a * f, a * e - b * d
+        J[p] = a * cof[p, 0, 0] + b * cof[p, 0, 1] + c * cof[p, 0, 2]
+
+
 def cofactor(F):
     """Cofactor matrix cof F = det(F) F^-T and det F of ``(..., 3, 3)`` arrays, in closed form
-    (several times faster than batched LAPACK on 3 x 3 matrices; det F = 0 gives cof F anyway)."""
+    (a compiled loop over the points; det F = 0 gives cof F anyway)."""
     F = np.asarray(F, dtype=float)
-    a, b, c = F[..., 0, 0], F[..., 0, 1], F[..., 0, 2]
-    d, e, f = F[..., 1, 0], F[..., 1, 1], F[..., 1, 2]
-    g, h, i = F[..., 2, 0], F[..., 2, 1], F[..., 2, 2]
-    cof = np.empty_like(F)
-    cof[..., 0, 0], cof[..., 0, 1], cof[..., 0, 2] = e * i - f * h, f * g - d * i, d * h - e * g
-    cof[..., 1, 0], cof[..., 1, 1], cof[..., 1, 2] = c * h - b * i, a * i - c * g, b * g - a * h
-    cof[..., 2, 0], cof[..., 2, 1], cof[..., 2, 2] = b * f - c * e, c * d - a * f, a * e - b * d
-    return cof, a * cof[..., 0, 0] + b * cof[..., 0, 1] + c * cof[..., 0, 2]
+    flat = np.ascontiguousarray(F.reshape(-1, 3, 3))
+    cof, J = np.empty_like(flat), np.empty(len(flat))
+    _cofactor(flat, cof, J)
+    return cof.reshape(F.shape), J.reshape(F.shape[:-2])[()]
 
 
 def admissible_inverse(F):
