@@ -12,8 +12,15 @@ from .base import Material, admissible_inverse, cofactor
 def _tangent(G, c, mu, lam, C):
     """C_iajb = mu delta_ij delta_ab + c G_ib G_ja + lam G_ia G_jb at every point: G (n, d, d),
     c (n,) into C (n, d, d, d, d) (a compiled loop: numpy's 4th-order temporaries cost ~1 us a point)."""
-    n, d, _ = G.shape
-    for p in range(n):
+    if G.shape[1] == 2:                 # a literal d: the loops unrolled
+        _tangent_d(G, c, mu, lam, C, 2)
+    else:
+        _tangent_d(G, c, mu, lam, C, G.shape[1])
+
+
+@njit(cache=True, inline="always")
+def _tangent_d(G, c, mu, lam, C, d):
+    for p in range(len(G)):
         for i in range(d):
             for a in range(d):
                 for j in range(d):

@@ -77,12 +77,19 @@ def _acoustic_extremes(C, N, n_axes, lowest, highest):
     """Eigenvalues of the symmetrised acoustic tensors of every point (C (n, d, d, d, d)) along
     the directions N (n_dir, d): the smallest over all of them into ``lowest`` (n,), the largest
     over the first ``n_axes`` into ``highest`` (n,). Closed form for d <= 2, LAPACK otherwise."""
-    d = N.shape[1]
+    if N.shape[1] == 2:                 # a literal d: the (d, d) loops unrolled
+        _acoustic_extremes_d(C, N, n_axes, lowest, highest, 2)
+    else:
+        _acoustic_extremes_d(C, N, n_axes, lowest, highest, N.shape[1])
+
+
+@njit(cache=True, inline="always")
+def _acoustic_extremes_d(C, N, n_axes, lowest, highest, d):
     A = np.empty((d, d))
     for p in range(C.shape[0]):
         lo, hi = np.inf, -np.inf
         for k in range(N.shape[0]):
-            _acoustic(C[p], N[k], 1.0, A)
+            _acoustic(C[p], N[k], 1.0, A, d)
             if d == 1:
                 small = large = A[0, 0]
             elif d == 2:

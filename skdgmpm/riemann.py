@@ -27,9 +27,14 @@ def _not_hyperbolic(face):
 
 # ---------------------------------------------------------------- point functions (one face)
 @njit(cache=True, inline="always")
-def _acoustic(C, n, rho, M):
+def _acoustic2(C, i, j, n0, n1):
+    """A_ij = C_iajb n_a n_b in 2D, summed as `_acoustic` does."""
+    return C[i, 0, j, 0] * (n0 * n0) + C[i, 0, j, 1] * (n0 * n1) + C[i, 1, j, 0] * (n1 * n0) + C[i, 1, j, 1] * (n1 * n1)
+
+
+@njit(cache=True, inline="always")
+def _acoustic(C, n, rho, M, d):
     """M_ij = rho C_iajb n_a n_b into M (d, d)."""
-    d = n.shape[0]
     for i in range(d):
         for j in range(d):
             s = 0.0
@@ -56,10 +61,9 @@ def _sqrt_spd2(m00, m01, m10, m11):
 
 
 @njit(cache=True, inline="always")
-def _sqrt_spd(M, Z, Zi):
+def _sqrt_spd(M, Z, Zi, d):
     """Z = sqrt(M) and Zi = Z^-1 for a symmetric (d, d) M; False where M is not positive definite.
     d = 1, 2 in closed form, otherwise by eigen-decomposition."""
-    d = M.shape[0]
     if d == 1:
         if not M[0, 0] > 0:
             return False
@@ -82,10 +86,9 @@ def _sqrt_spd(M, Z, Zi):
 
 
 @njit(cache=True, inline="always")
-def _solve(A, b, x):
+def _solve(A, b, x, d):
     """x = A^-1 b for a small (d, d) A by Gaussian elimination with partial pivoting (A, b are
     overwritten)."""
-    d = b.shape[0]
     for k in range(d):
         p = k
         for r in range(k + 1, d):
@@ -107,9 +110,8 @@ def _solve(A, b, x):
 
 
 @njit(cache=True, inline="always")
-def _godunov(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s, A, b):
+def _godunov(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s, A, b, d):
     """(t*, v*) of one face into t_s, v_s; A (d, d) and b (d,) are scratch."""
-    d = v_L.shape[0]
     for i in range(d):
         zv_L, zv_R = 0.0, 0.0
         for j in range(d):
@@ -117,18 +119,12 @@ def _godunov(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s, A, b):
             zv_R += Z_R[i, j] * v_R[j]
             A[i, j] = Z_L[i, j] + Z_R[i, j]
         b[i] = t_R[i] - t_L[i] + zv_L + zv_R
-    _solve(A, b, v_s)
+    _solve(A, b, v_s, d)
     for i in range(d):
         s = 0.0
         for j in range(d):
             s += Z_L[i, j] * (v_s[j] - v_L[j])
         t_s[i] = t_L[i] + s
-
-
-@njit(cache=True, inline="always")
-def _acoustic2(C, i, j, n0, n1):
-    """A_ij = C_iajb n_a n_b in 2D, summed as `_acoustic` does."""
-    return C[i, 0, j, 0] * (n0 * n0) + C[i, 0, j, 1] * (n0 * n1) + C[i, 1, j, 0] * (n1 * n0) + C[i, 1, j, 1] * (n1 * n1)
 
 
 @njit(cache=True, inline="always")
@@ -157,38 +153,59 @@ def _transverse_positive(w, C, n0, n1, rho, scale, out):
 
 
 # ---------------------------------------------------------------- loops over faces
+# The loops take d as an argument and are inlined into a kernel that calls them with the literal
+# 2 in 2D: the compiler then unrolls every (d, d) loop.
+@njit(cache=True, inline="always")
+def _impedances_d(C, N, rho, Z, Zi, d):
+    M = np.empty((d, d))
+    for f in range(len(N)):
+        _acoustic(C[f], N[f], rho[f], M, d)
+        if not _sqrt_spd(M, Z[f], Zi[f], d):
+            return f
+    return -1
+
+
 @njit(cache=True)
 def _impedances(C, N, rho, Z, Zi):
     d = N.shape[1]
-    M = np.empty((d, d))
-    for f in range(len(N)):
-        _acoustic(C[f], N[f], rho[f], M)
-        if not _sqrt_spd(M, Z[f], Zi[f]):
-            return f
-    return -1
+    return _impedances_d(C, N, rho, Z, Zi, 2) if d == 2 else _impedances_d(C, N, rho, Z, Zi, d)
+
+
+@njit(cache=True, inline="always")
+def _godunov_states_d(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s, d):
+    A, b = np.empty((d, d)), np.empty(d)
+    for f in range(len(v_L)):
+        _godunov(t_L[f], v_L[f], t_R[f], v_R[f], Z_L[f], Z_R[f], t_s[f], v_s[f], A, b, d)
 
 
 @njit(cache=True)
 def _godunov_states(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s):
     d = v_L.shape[1]
-    A, b = np.empty((d, d)), np.empty(d)
-    for f in range(len(v_L)):
-        _godunov(t_L[f], v_L[f], t_R[f], v_R[f], Z_L[f], Z_R[f], t_s[f], v_s[f], A, b)
+    if d == 2:
+        _godunov_states_d(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s, 2)
+    else:
+        _godunov_states_d(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s, d)
+
+
+@njit(cache=True, inline="always")
+def _godunov_faces_d(t_L, v_L, C_L, rho_L, t_R, v_R, C_R, rho_R, N, Z_L, t_s, v_s, d):
+    M, Z_R, Zi, A, b = np.empty((d, d)), np.empty((d, d)), np.empty((d, d)), np.empty((d, d)), np.empty(d)
+    for f in range(len(N)):
+        _acoustic(C_L[f], N[f], rho_L[f], M, d)
+        if not _sqrt_spd(M, Z_L[f], Zi, d):
+            return f
+        _acoustic(C_R[f], N[f], rho_R[f], M, d)
+        if not _sqrt_spd(M, Z_R, Zi, d):
+            return f
+        _godunov(t_L[f], v_L[f], t_R[f], v_R[f], Z_L[f], Z_R, t_s[f], v_s[f], A, b, d)
+    return -1
 
 
 @njit(cache=True)
 def _godunov_faces(t_L, v_L, C_L, rho_L, t_R, v_R, C_R, rho_R, N, Z_L, t_s, v_s):
-    d = N.shape[1]
-    M, Z_R, Zi, A, b = np.empty((d, d)), np.empty((d, d)), np.empty((d, d)), np.empty((d, d)), np.empty(d)
-    for f in range(len(N)):
-        _acoustic(C_L[f], N[f], rho_L[f], M)
-        if not _sqrt_spd(M, Z_L[f], Zi):
-            return f
-        _acoustic(C_R[f], N[f], rho_R[f], M)
-        if not _sqrt_spd(M, Z_R, Zi):
-            return f
-        _godunov(t_L[f], v_L[f], t_R[f], v_R[f], Z_L[f], Z_R, t_s[f], v_s[f], A, b)
-    return -1
+    if N.shape[1] == 2:
+        return _godunov_faces_d(t_L, v_L, C_L, rho_L, t_R, v_R, C_R, rho_R, N, Z_L, t_s, v_s, 2)
+    return _godunov_faces_d(t_L, v_L, C_L, rho_L, t_R, v_R, C_R, rho_R, N, Z_L, t_s, v_s, N.shape[1])
 
 
 @njit(cache=True)
@@ -300,9 +317,11 @@ def transverse_positive(w_F, w_p, C, n, rho0):
 
     With g = (C : w_F) n and Z = sqrt(rho0 A_n), decomposing w on the eigenvectors
     r_k = [Y_k (x) n ; -rho0 c_k Y_k] of d F_n / dU gives the closed form
-    B+ w = [ (Z^-1 g - w_p / rho0) / 2 (x) n ;  -g / 2 + Z w_p / (2 rho0) ].
+    B+ w = [ (Z^-1 g - w_p / rho0) / 2 (x) n ;  -g / 2 + Z w_p / (2 rho0) ].  2D only (CTU).
     """
     nf, d = n.shape
+    if d != 2:
+        raise ValueError(f"transverse_positive: the CTU splitting is 2D, got d = {d}")
     w = np.concatenate([w_F.reshape(nf, d * d), w_p], axis=1)
     out = np.empty_like(w)
     bad = _transverse_positives(w, C, n, np.asarray(rho0, dtype=float), out)
