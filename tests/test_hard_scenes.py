@@ -19,8 +19,8 @@ PLATE = ["grid.cells=[8,6]", "run.t_end=2e-4", "method.cfl=0.35", 'method.limite
 CASES = {   # name: (scene, overrides, stored (steps, min sigma11, max sigma11, min v1, max v1, min J, total energy))
     # LASAT-like, 12 x 12 structured quads, ADER-DGMPM S1T1 + Barth-Jespersen (the scene's method)
     "lasat_2d": ("lasat_2d", ['grid.mesh="lasat_12.msh"', "run.t_end=1e-4"],
-                 (21, -23018340053.012665, 461430126.6229157, -9.516267037576426, 499.551826295581,
-                  0.917216913717336, 698090560.9253606)),
+                 (21, -5810926177.791535, 114874798.25150652, -2.4017957469214823, 126.19681905176697,
+                  0.9789023140897363, 44128372.73493507)),
     # multi-holed cell, 233 unstructured quads of about 2 mm, ADER-DGMPM S1T1, CFL 0.2
     "multiholed_cell_2d": ("multiholed_cell_2d", ['grid.mesh="multiholed_cell_2mm.msh"', "run.t_end=5e-8"],
                            (13, -4969289453.639224, 203131675.69459882, -106.20258529952442, 4.685674103813851,
@@ -65,20 +65,20 @@ def test_hard_scene_at_coarse_resolution(case):
     assert h["min_J"].min() < 1 and np.all(h["min_acoustic"] > 0)
     assert np.all(np.diff(h["balance"]) <= 1e-4 * max(np.abs(h["external_work"]).max(), 1.0))
     if case == "lasat_2d":
-        lasat_front_carries_the_pressure(r.X, f)
+        lasat_front_carries_the_pressure(r.X, f, r.scene.get("bc.impact.value")[0])
 
 
-def lasat_front_carries_the_pressure(X, f):
+def lasat_front_carries_the_pressure(X, f, p):
     """At t = 1e-4 s the compression front is at c_P t = 0.59 m (2.4 cells of this 12 x 12 mesh):
-    behind it, near the loaded face and the bottom line, P11 is the applied -2e10 Pa within
-    -15 % / +20 % (measured: 0.90 to 1.15 of it; ADER-DGMPM S1T1 with Barth-Jespersen overshoots
+    behind it, near the loaded face and the bottom line, P11 is the applied -p = -5e9 Pa within
+    -15 % / +20 % (measured: 0.89 to 1.15 of it; ADER-DGMPM S1T1 with Barth-Jespersen overshoots
     next to the loaded face at this resolution); ahead of it the plate is at rest: the DG
     precursor decays by about 3 per cell, below 1e-3 of the load beyond X1 = 2 m (measured 2e-4)."""
     near = (X[:, 0] < 0.35) & (X[:, 1] < 0.5)
-    ratio = f["P11"][near] / -2e10
+    ratio = f["P11"][near] / -p
     assert ratio.min() > 0.85 and ratio.max() < 1.2
     ahead = X[:, 0] > 2.0
-    assert np.abs(f["P11"][ahead]).max() < 1e-3 * 2e10 and np.abs(f["v1"][ahead]).max() < 0.5
+    assert np.abs(f["P11"][ahead]).max() < 1e-3 * p and np.abs(f["v1"][ahead]).max() < 0.5
 
 
 def test_stability_bisection_finds_the_upwind_limit():
