@@ -48,6 +48,26 @@ def _cofactor(F, cof, J):
         J[p] = a * cof[p, 0, 0] + b * cof[p, 0, 1] + c * cof[p, 0, 2]
 
 
+@njit(cache=True, inline="always")
+def _inverse_transpose(F, G):
+    """G = F^-T of one admissible (3, 3) F into G, as `admissible_inverse` computes it: returns
+    (ok, J) with ok = det F > 0; where not ok, G = I and J = 1 (the values at F = I)."""
+    a, b, c = F[0, 0], F[0, 1], F[0, 2]
+    d, e, f = F[1, 0], F[1, 1], F[1, 2]
+    g, h, i = F[2, 0], F[2, 1], F[2, 2]
+    c00, c01, c02 = e * i - f * h, f * g - d * i, d * h - e * g
+    J = a * c00 + b * c01 + c * c02
+    if not J > 0.0:
+        for r in range(3):
+            for s in range(3):
+                G[r, s] = 1.0 if r == s else 0.0
+        return False, 1.0
+    G[0, 0], G[0, 1], G[0, 2] = c00 / J, c01 / J, c02 / J
+    G[1, 0], G[1, 1], G[1, 2] = (c * h - b * i) / J, (a * i - c * g) / J, (b * g - a * h) / J
+    G[2, 0], G[2, 1], G[2, 2] = (b * f - c * e) / J, (c * d - a * f) / J, (a * e - b * d) / J
+    return True, J
+
+
 def cofactor(F):
     """Cofactor matrix cof F = det(F) F^-T and det F of ``(..., 3, 3)`` arrays, in closed form
     (a compiled loop over the points; det F = 0 gives cof F anyway)."""

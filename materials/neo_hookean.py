@@ -5,28 +5,54 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .base import Material, admissible_inverse, cofactor
+from .base import Material, _inverse_transpose, admissible_inverse, cofactor
 
 
 @njit(cache=True)
-def _tangent(G, c, mu, lam, C):
-    """C_iajb = mu delta_ij delta_ab + c G_ib G_ja + lam G_ia G_jb at every point: G (n, d, d),
-    c (n,) into C (n, d, d, d, d) (a compiled loop: numpy's 4th-order temporaries cost ~1 us a point)."""
-    if G.shape[1] == 2:                 # a literal d: the loops unrolled
-        _tangent_d(G, c, mu, lam, C, 2)
+def _first_piola(F, mu, lam, P):
+    """P = mu (F - G) + lam ln(J) G, G = F^-T, at every point: F (n, 3, 3) into P (n, 3, 3)
+    (one compiled loop with the kinematics: the numpy chain cost ~10 passes over the points)."""
+    G = np.empty((3, 3))
+    for p in range(len(F)):
+        ok, J = _inverse_transpose(F[p], G)
+        lam_lnJ = lam * np.log(J)
+        for i in range(3):
+            for a in range(3):
+                f = F[p, i, a] if ok else (1.0 if i == a else 0.0)
+                P[p, i, a] = mu * (f - G[i, a]) + lam_lnJ * G[i, a]
+
+
+@njit(cache=True)
+def _tangent(F, mu, lam, C):
+    """C_iajb = mu delta_ij delta_ab + c G_ib G_ja + lam G_ia G_jb, c = mu - lam ln J, at every
+    point: F (n, 3, 3) into the d-block C (n, d, d, d, d) (a compiled loop: numpy's 4th-order
+    temporaries cost ~1 us a point)."""
+    if C.shape[1] == 2:                 # a literal d: the loops unrolled
+        _tangent_d(F, mu, lam, C, 2)
     else:
-        _tangent_d(G, c, mu, lam, C, G.shape[1])
+        _tangent_d(F, mu, lam, C, C.shape[1])
 
 
 @njit(cache=True, inline="always")
-def _tangent_d(G, c, mu, lam, C, d):
-    for p in range(len(G)):
+def _tangent_d(F, mu, lam, C, d):
+    # an embedded F is block diagonal (F33 = 1), so is G = F^-T: the d-block of C only involves
+    # the d-block of G
+    G = np.empty((3, 3))
+    for p in range(len(F)):
+        _, J = _inverse_transpose(F[p], G)
+        c = mu - lam * np.log(J)
         for i in range(d):
             for a in range(d):
                 for j in range(d):
                     for b in range(d):
-                        C[p, i, a, j, b] = (mu * ((i == j) * (a == b)) + c[p] * (G[p, i, b] * G[p, j, a])
-                                            + lam * (G[p, i, a] * G[p, j, b]))
+                        C[p, i, a, j, b] = (mu * ((i == j) * (a == b)) + c * (G[i, b] * G[j, a])
+                                            + lam * (G[i, a] * G[j, b]))
+
+
+def _points(F):
+    """(n, 3, 3) contiguous float view of F (..., 3, 3) and the batch shape."""
+    F = np.asarray(F, dtype=float)
+    return np.ascontiguousarray(F.reshape(-1, 3, 3)), F.shape[:-2]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -48,20 +74,18 @@ class NeoHookean(Material):
         return F, G, np.log(J), ok
 
     def first_piola(self, F):
-        Fs, G, lnJ, _ = self._kinematics(F)
-        return self.mu * (Fs - G) + self.lam * lnJ[..., None, None] * G
+        F, shape = _points(F)
+        P = np.empty_like(F)
+        _first_piola(F, self.mu, self.lam, P)
+        return P.reshape(shape + (3, 3))
 
     def tangent(self, F):
         return self.tangent_block(F, 3)
 
     def tangent_block(self, F, d):
-        # an embedded F is block diagonal (F33 = 1), so is G = F^-T: the d-block of C only
-        # involves the d-block of G
-        _, G, lnJ, _ = self._kinematics(F)
-        shape = np.shape(G)[:-2]
-        G = np.ascontiguousarray(G[..., :d, :d]).reshape(-1, d, d)
-        C = np.empty((len(G), d, d, d, d))
-        _tangent(G, np.ravel(self.mu - self.lam * lnJ), self.mu, self.lam, C)
+        F, shape = _points(F)
+        C = np.empty((len(F), d, d, d, d))
+        _tangent(F, self.mu, self.lam, C)
         return C.reshape(shape + (d, d, d, d))
 
     def energy(self, F):

@@ -7,6 +7,7 @@ The flux is linear in Q. State rows are laid out ``[F (row-major d x d), p or v 
 docs/CONVENTIONS.md); ``d`` is the scene dimension.
 """
 import numpy as np
+from numba import njit
 
 
 def n_components(d):
@@ -24,11 +25,20 @@ def join(T, v):
     return np.concatenate([T.reshape(n, d * d), v], axis=1)
 
 
+@njit(cache=True)
+def _embed(F, F3):
+    d = F.shape[1]
+    for p in range(len(F)):
+        for i in range(3):
+            for j in range(3):
+                F3[p, i, j] = F[p, i, j] if i < d and j < d else (1.0 if i == j else 0.0)
+
+
 def embed(F):
-    """(n, d, d) -> (n, 3, 3): plane strain / uniaxial strain embedding, identity elsewhere."""
-    n, d, _ = F.shape
-    F3 = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
-    F3[:, :d, :d] = F
+    """(n, d, d) -> (n, 3, 3): plane strain / uniaxial strain embedding, identity elsewhere (one
+    compiled pass; F may be a strided view of a state array)."""
+    F3 = np.empty((len(F), 3, 3))
+    _embed(F, F3)
     return F3
 
 
