@@ -111,9 +111,9 @@ class DGMPM(GodunovScheme):
         Q[:, self.d * self.d:] = U[:, self.d * self.d:] / self.map.rho[:, None]
         return GridState(U, Q)
 
-    def volume_flux(self, grid_state):
-        """(c) sum_alpha K^alpha F_alpha(Q)."""
-        return system.volume_flux(grid_state.Q, self.ops.stiffness)
+    def volume_flux(self, grid_state, out=None):
+        """(c) sum_alpha K^alpha F_alpha(Q) (added to ``out`` if given)."""
+        return system.volume_flux(grid_state.Q, self.ops.stiffness, out)
 
     def transverse_flux(self, interior, boundary, dt):
         """CTU [R18 eq 34-37]: each fluctuation entering a cell is split on the characteristic
@@ -154,7 +154,7 @@ class DGMPM(GodunovScheme):
     def residual(self, grid_state, time, dt):
         """M dU/dt = K^alpha F_alpha - int Phi F_N* + int Phi S; also returns the boundary power (W)."""
         R, power = self.surface_residual(grid_state, time, dt)
-        R += self.volume_flux(grid_state)
+        self.volume_flux(grid_state, out=R)
         if self.body_force is not None:          # int Phi rho0 b, the particles as quadrature
             R += self.map.S.T @ (self.particles.volume[:, None] * self.source(self.particles, time))
         return R, power

@@ -7,8 +7,21 @@ operators here give the face average of each side's DG trace, and the surface in
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 import scipy.sparse as sp
 from skfem import FacetBasis, InteriorFacetBasis
+
+
+@njit(cache=True)
+def _integrate(indptr, indices, data, measure, flux, out):
+    """out[i] += T[f, i] (measure[f] flux[f]) for the CSR rows f of a trace T, in face order (as
+    scipy's T.T @ (measure flux), without the temporaries)."""
+    nc = flux.shape[1]
+    for f in range(len(indptr) - 1):
+        for k in range(indptr[f], indptr[f + 1]):
+            i, w = indices[k], data[k]
+            for c in range(nc):
+                out[i, c] += w * (measure[f] * flux[f, c])
 
 
 def _point_trace(fb):
@@ -72,7 +85,9 @@ class FaceSet:
     def integrate(self, flux, side="L"):
         """``int_Gamma Phi_i F*`` on the given side for face-constant ``flux`` (nf, ncomp)."""
         T = self.T_L if side == "L" else self.T_R
-        return T.T @ (self.measure[:, None] * flux)
+        out = np.zeros((T.shape[1], flux.shape[1]))
+        _integrate(T.indptr, T.indices, T.data, self.measure, flux, out)
+        return out
 
 
 def _rows(fb, pointwise):

@@ -188,24 +188,43 @@ def _godunov_states(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s):
 
 
 @njit(cache=True, inline="always")
-def _godunov_faces_d(t_L, v_L, C_L, rho_L, t_R, v_R, C_R, rho_R, N, Z_L, t_s, v_s, d):
-    M, Z_R, Zi, A, b = np.empty((d, d)), np.empty((d, d)), np.empty((d, d)), np.empty((d, d)), np.empty(d)
+def _godunov_fluxes_d(Q_L, C_L, rho_L, Q_R, C_R, rho_R, N, flux, fluct_L, fluct_R, d):
+    M, Z_L, Z_R, Zi, A, b = (np.empty((d, d)), np.empty((d, d)), np.empty((d, d)), np.empty((d, d)),
+                             np.empty((d, d)), np.empty(d))
+    t_L, t_R, t_s, v_s = np.empty(d), np.empty(d), np.empty(d), np.empty(d)
+    dd = d * d
     for f in range(len(N)):
+        for i in range(d):                               # traction t = P N of each side
+            sL, sR = 0.0, 0.0
+            for a in range(d):
+                sL += Q_L[f, i * d + a] * N[f, a]
+                sR += Q_R[f, i * d + a] * N[f, a]
+            t_L[i], t_R[i] = sL, sR
+        v_L, v_R = Q_L[f, dd:], Q_R[f, dd:]
         _acoustic(C_L[f], N[f], rho_L[f], M, d)
-        if not _sqrt_spd(M, Z_L[f], Zi, d):
+        if not _sqrt_spd(M, Z_L, Zi, d):
             return f
         _acoustic(C_R[f], N[f], rho_R[f], M, d)
         if not _sqrt_spd(M, Z_R, Zi, d):
             return f
-        _godunov(t_L[f], v_L[f], t_R[f], v_R[f], Z_L[f], Z_R, t_s[f], v_s[f], A, b, d)
+        _godunov(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s, A, b, d)
+        for i in range(d):                               # F_N = -[v (x) N ; t]
+            for a in range(d):
+                k = i * d + a
+                flux[f, k] = -(v_s[i] * N[f, a])
+                fluct_L[f, k] = flux[f, k] + v_L[i] * N[f, a]
+                fluct_R[f, k] = -(v_R[i] * N[f, a]) - flux[f, k]
+            flux[f, dd + i] = -t_s[i]
+            fluct_L[f, dd + i] = flux[f, dd + i] + t_L[i]
+            fluct_R[f, dd + i] = -t_R[i] - flux[f, dd + i]
     return -1
 
 
 @njit(cache=True)
-def _godunov_faces(t_L, v_L, C_L, rho_L, t_R, v_R, C_R, rho_R, N, Z_L, t_s, v_s):
+def _godunov_fluxes(Q_L, C_L, rho_L, Q_R, C_R, rho_R, N, flux, fluct_L, fluct_R):
     if N.shape[1] == 2:
-        return _godunov_faces_d(t_L, v_L, C_L, rho_L, t_R, v_R, C_R, rho_R, N, Z_L, t_s, v_s, 2)
-    return _godunov_faces_d(t_L, v_L, C_L, rho_L, t_R, v_R, C_R, rho_R, N, Z_L, t_s, v_s, N.shape[1])
+        return _godunov_fluxes_d(Q_L, C_L, rho_L, Q_R, C_R, rho_R, N, flux, fluct_L, fluct_R, 2)
+    return _godunov_fluxes_d(Q_L, C_L, rho_L, Q_R, C_R, rho_R, N, flux, fluct_L, fluct_R, N.shape[1])
 
 
 @njit(cache=True)
@@ -260,15 +279,17 @@ def godunov_state(t_L, v_L, t_R, v_R, Z_L, Z_R):
     return t_s, v_s
 
 
-def godunov_faces(t_L, v_L, C_L, rho_L, t_R, v_R, C_R, rho_R, N):
-    """`godunov_state` from the two sides' linearisations (tangents C, densities rho) in one pass:
-    returns t*, v* (nf, d) and side L's impedance Z_L (nf, d, d)."""
-    nf, d = N.shape
-    Z_L, t_s, v_s = np.empty((nf, d, d)), np.empty((nf, d)), np.empty((nf, d))
-    bad = _godunov_faces(t_L, v_L, C_L, rho_L, t_R, v_R, C_R, rho_R, N, Z_L, t_s, v_s)
+def godunov_fluxes(Q_L, C_L, rho_L, Q_R, C_R, rho_R, N):
+    """Godunov flux F_N(Q*) and the fluctuations entering each side, F_N(Q*) - F_N(Q_L) (A- dQ,
+    into side L) and F_N(Q_R) - F_N(Q*) (A+ dQ, into side R), from the two sides' states
+    Q = [P, v] (nf, d*d + d) and linearisations (tangents C, densities rho) in one pass over the
+    faces: traction, both impedances, `godunov_state`, flux. Returns three (nf, d*d + d) arrays."""
+    flux, fluct_L, fluct_R = np.empty_like(Q_L), np.empty_like(Q_L), np.empty_like(Q_L)
+    bad = _godunov_fluxes(Q_L, C_L, np.asarray(rho_L, dtype=float), Q_R, C_R, np.asarray(rho_R, dtype=float),
+                          N, flux, fluct_L, fluct_R)
     if bad >= 0:
         _not_hyperbolic(bad)
-    return t_s, v_s, Z_L
+    return flux, fluct_L, fluct_R
 
 
 def godunov_state_eigen(P_L, v_L, P_R, v_R, C_L, C_R, rho_L, rho_R, N):

@@ -15,7 +15,7 @@ from .bcs import FREE
 from .errors import InputError, InstabilityError
 from .faces import boundary_faces
 from .health import assess
-from .riemann import godunov_faces, impedance
+from .riemann import godunov_fluxes, impedance
 
 
 @dataclass
@@ -46,16 +46,16 @@ class GridState:
 
 @dataclass
 class FaceStates:
-    """Side-averaged states and linearisation on a face set (one side or both)."""
+    """Godunov flux on a face set and what the CTU splitting needs: the fluctuations entering
+    each side and the sides' linearisations (side R is None on boundary faces)."""
 
-    t_L: np.ndarray
-    v_L: np.ndarray
-    C_L: np.ndarray
-    rho_L: np.ndarray
-    Z_L: np.ndarray
-    flux: np.ndarray = None          # F_N* (nf, ncomp)
-    fluct_L: np.ndarray = None       # A- dU entering side L (nf, ncomp)
+    flux: np.ndarray                 # F_N* (nf, ncomp)
+    fluct_L: np.ndarray              # A- dU entering side L (nf, ncomp)
+    C_L: np.ndarray                  # tangent (nf, d, d, d, d)
+    rho_L: np.ndarray                # (nf,)
     fluct_R: np.ndarray = None       # A+ dU entering side R
+    C_R: np.ndarray = None
+    rho_R: np.ndarray = None
 
 
 def advance_positions(state, v_new, dt, d):
@@ -114,39 +114,33 @@ class GodunovScheme:
         """Operator from the state's unknowns to the face rows (the DG trace by default)."""
         return faces.T_L if side == "L" else faces.T_R
 
-    def _side(self, faces, T, grid_state, cells):
-        Qf, Ff, rho = self.face_values(T, grid_state, cells)
-        P, v = system.split(Qf, self.d)
-        C = self.materials.tangent(Ff, self.cell_material[cells])
-        t = np.einsum("fia,fa->fi", P, faces.normal)
-        return t, v, C, rho, Qf
+    def _side(self, faces, side, grid_state, cells):
+        """Q (nf, ncomp), tangent C (nf, d, d, d, d) and density (nf,) on one side of a face set."""
+        Qf, Ff, rho = self.face_values(self.face_operator(faces, side), grid_state, cells)
+        return Qf, self.materials.tangent(Ff, self.cell_material[cells]), rho
 
     def boundary_flux(self, grid_state, time):
         """(d) ghost states -> boundary stationary states and fluxes; returns states and power."""
         b = self.boundary
-        t_L, v_L, C, rho, Q_L = self._side(b, self.face_operator(b, "L"), grid_state, b.cell_L)
+        Q_L, C, rho = self._side(b, "L", grid_state, b.cell_L)
+        P, v_L = system.split(Q_L, self.d)
+        t_L = np.einsum("fia,fa->fi", P, b.normal)
         Z = impedance(C, b.normal, rho)
         t_s, v_s = t_L.copy(), v_L.copy()
         for sel, bc in self.bc_groups:
             t_s[sel], v_s[sel] = bc.star(time, t_L[sel], v_L[sel], Z[sel], b.normal[sel])
         flux = system.normal_flux(t_s, v_s, b.normal)
-        fs = FaceStates(t_L, v_L, C, rho, Z, flux,
-                        fluct_L=flux - system.normal_flux(t_L, v_L, b.normal))
+        fs = FaceStates(flux, flux - system.normal_flux(t_L, v_L, b.normal), C, rho)
         power = float(np.sum(b.measure * np.einsum("fi,fi->f", t_s, v_s)))
         return fs, power
 
     def interface_flux(self, grid_state):
         """(e) Godunov fluxes at interior faces from the linearised Riemann solver."""
         f = self.interior
-        t_L, v_L, C_L, rho_L, _ = self._side(f, self.face_operator(f, "L"), grid_state, f.cell_L)
-        t_R, v_R, C_R, rho_R, _ = self._side(f, self.face_operator(f, "R"), grid_state, f.cell_R)
-        t_s, v_s, Z_L = godunov_faces(t_L, v_L, C_L, rho_L, t_R, v_R, C_R, rho_R, f.normal)
-        flux = system.normal_flux(t_s, v_s, f.normal)
-        fs = FaceStates(t_L, v_L, C_L, rho_L, Z_L, flux,
-                        fluct_L=flux - system.normal_flux(t_L, v_L, f.normal),
-                        fluct_R=system.normal_flux(t_R, v_R, f.normal) - flux)
-        fs.C_R, fs.rho_R = C_R, rho_R
-        return fs
+        Q_L, C_L, rho_L = self._side(f, "L", grid_state, f.cell_L)
+        Q_R, C_R, rho_R = self._side(f, "R", grid_state, f.cell_R)
+        flux, fluct_L, fluct_R = godunov_fluxes(Q_L, C_L, rho_L, Q_R, C_R, rho_R, f.normal)
+        return FaceStates(flux, fluct_L, C_L, rho_L, fluct_R, C_R, rho_R)
 
     def transverse_flux(self, interior, boundary, dt):
         """Corrections of the interior and boundary fluxes (none by default)."""
@@ -154,10 +148,10 @@ class GodunovScheme:
 
     def surface_residual(self, grid_state, time, dt):
         """-int Phi F_N* over all faces; also returns the power through the boundary (W)."""
-        R = np.zeros((self.n_dofs, grid_state.U.shape[1]))     # the unknowns may live on particles
         boundary, power = self.boundary_flux(grid_state, time)
         interior = self.interface_flux(grid_state)
         corr_int, corr_bnd = self.transverse_flux(interior, boundary, dt)
+        R = np.zeros((self.n_dofs, grid_state.U.shape[1]))     # the unknowns may live on particles
         flux = interior.flux + corr_int
         R -= self.interior.integrate(flux, "L")
         R += self.interior.integrate(flux, "R")

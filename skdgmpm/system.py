@@ -54,13 +54,29 @@ def normal_flux(traction, velocity, N):
     return -join(velocity[:, :, None] * N[:, None, :], traction)
 
 
-def volume_flux(Q, stiffness):
-    """sum_alpha K^alpha F_alpha(Q) for nodal Q (n_dofs, d*d + d) [R18 eq 19]."""
-    d = len(stiffness)
-    P, v = split(Q, d)
-    R = np.zeros_like(Q)
-    RF, Rp = split(R, d)
+@njit(cache=True)
+def _volume_flux(Q, indptr, indices, data, alpha, d, R):
+    """R += K^alpha F_alpha(Q) for one CSR matrix K^alpha: F-rows (i, alpha) get -K v_i, p-rows
+    -K P_i,alpha (each row's products summed in CSR order, as scipy's product does)."""
+    dd = d * d
+    sv, sP = np.empty(d), np.empty(d)
+    for r in range(len(indptr) - 1):
+        sv[:] = 0.0
+        sP[:] = 0.0
+        for k in range(indptr[r], indptr[r + 1]):
+            c, w = indices[k], data[k]
+            for i in range(d):
+                sv[i] += w * Q[c, dd + i]
+                sP[i] += w * Q[c, i * d + alpha]
+        for i in range(d):
+            R[r, i * d + alpha] -= sv[i]
+            R[r, dd + i] -= sP[i]
+
+
+def volume_flux(Q, stiffness, out=None):
+    """sum_alpha K^alpha F_alpha(Q) for nodal Q (n_dofs, d*d + d) [R18 eq 19] (CSR stiffness
+    matrices), added to ``out`` if given; one compiled pass over each K^alpha."""
+    R = np.zeros_like(Q) if out is None else out
     for alpha, K in enumerate(stiffness):
-        RF[:, :, alpha] = -(K @ v)                     # F-row i, column alpha: -v_i
-        Rp -= K @ P[:, :, alpha]                       # p-row i: -P_i,alpha
+        _volume_flux(Q, K.indptr, K.indices, K.data, alpha, len(stiffness), R)
     return R
