@@ -68,9 +68,9 @@ class ADERDGMPM(ADERDGFEM):
         M = np.einsum("cg,cgk,cgl->ckl", w, self.chi_gauss, self.chi_gauss)
         M += np.einsum("ck,kl->ckl", 1.0 - mask, np.eye(self.n_max))          # padding rows
         G = np.einsum("cg,cgk,cgla->ackl", w, self.chi_gauss, dchi_gauss)
-        self.D_particles = np.linalg.solve(M[None], G)                          # (d, nel, nm, nm)
-        _, self.grad_at_particles = mls(xi, cells)                              # Taylor guess
-        self.grad_at_particles = np.moveaxis(self.grad_at_particles, -1, 0)     # (d, nel, nm, nm)
+        self.D_particles = np.ascontiguousarray(np.linalg.solve(M[None], G))    # (d, nel, nm, nm)
+        _, grad = mls(xi, cells)                                                # Taylor guess
+        self.grad_at_particles = np.ascontiguousarray(np.moveaxis(grad, -1, 0))  # (d, nel, nm, nm)
         self.E_gauss = self._sparse(self.chi_gauss, np.arange(nel * nq).reshape(nel, nq))
         # facet points: each side evaluates its own cell's MLS reconstruction
         self._face_ops = {}
