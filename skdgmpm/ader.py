@@ -65,6 +65,29 @@ def _divergence_cells_d(Q, D, out, d):
                         out[b, c, k, dd + i] -= sP
 
 
+@njit(cache=True)
+def _picard_update(U0, T, div, dt, scale, u_hat, new):
+    """One Picard update new[s] = U0[s] - dt sum_s' T[s, s'] div[s'] (U0 (1 or P+1, n, nc)
+    broadcast over the time nodes; div, u_hat, new (P+1, n, nc)); returns the change
+    max |new - u_hat| / scale (nan if any is nan), all in one pass."""
+    n_t, n, nc = new.shape
+    change, nan = 0.0, False
+    for s in range(n_t):
+        s0 = s if len(U0) > 1 else 0
+        for j in range(n):
+            for c in range(nc):
+                acc = 0.0
+                for r in range(n_t):
+                    acc += T[s, r] * div[r, j, c]
+                x = U0[s0, j, c] - dt * acc
+                new[s, j, c] = x
+                ch = abs(x - u_hat[s, j, c]) / scale[c]
+                if ch > change:
+                    change = ch
+                nan = nan or ch != ch
+    return np.nan if nan else change
+
+
 def time_matrices(order):
     """Gauss-Legendre nodes and weights on [0, 1] and the predictor matrix T = K_tau^-1 M_tau."""
     x, w = legendre.leggauss(order + 1)
@@ -172,9 +195,13 @@ class ADERDGFEM(DGFEM):
         scale = np.ones(U.shape[-1])
         scale[: d * d] = np.abs(U[..., : d * d]).max() or 1.0
         scale[d * d:] = np.abs(U[..., d * d:]).max() or 1.0
+        shape = u_hat.shape
+        flat = lambda a: a.reshape(len(a), -1, shape[-1])                       # noqa: E731 (views)
+        U0, u_hat = flat(np.ascontiguousarray(U0)), np.ascontiguousarray(u_hat)
         for it in range(1, self.picard_max + 1):
-            new = U0 - dt * np.tensordot(self.T_tau, self._divergence(law(u_hat), D), axes=1)
-            change = np.max(np.abs(new - u_hat) / scale)
+            div = self._divergence(law(u_hat), D)
+            new = np.empty(shape)
+            change = _picard_update(U0, self.T_tau, flat(div), dt, scale, flat(u_hat), flat(new))
             u_hat = new
             if change <= self.picard_tol:
                 break

@@ -138,15 +138,17 @@ class ADERDGMPM(ADERDGFEM):
         return unpad(u_hat), unpad(q_hat)
 
     def _law_cells(self, U):
-        """The law at the particles on padded (..., nel, n_max, nc) arrays (padding stays zero)."""
+        """The law at the particles on padded (..., nel, n_max, nc) arrays (padding stays zero):
+        one evaluation over every particle of every batch entry."""
         nc = U.shape[-1]
-        real = U.reshape(-1, len(self.mask), nc)[:, self.slot]                 # (batch, n_particles, nc)
-        out = np.zeros((len(real), len(self.mask), nc))
-        out[:, self.slot] = np.stack([self._law_particles(r) for r in real])
+        padded = U.reshape(-1, len(self.mask), nc)
+        n_rep = len(padded)
+        real = padded[:, self.slot].reshape(-1, nc)                          # (batch * n_particles, nc)
+        p = self.particles
+        Q = self.point_state(real, np.tile(p.cell, n_rep), np.tile(p.rho0, n_rep))
+        out = np.zeros_like(padded)
+        out[:, self.slot] = Q.reshape(n_rep, -1, nc)
         return out.reshape(U.shape)
-
-    def _law_particles(self, U):
-        return self.point_state(U, self.particles.cell, self.particles.rho0)
 
     # ---------------------------------------------------------------- corrector and back-map
     def corrector(self, dofs, u_hat, q_hat, time, dt, source=None):
