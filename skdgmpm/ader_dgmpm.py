@@ -51,6 +51,10 @@ class ADERDGMPM(ADERDGFEM):
         xi[self.slot] = p.xi
         self.mask = np.zeros(nel * self.n_max)
         self.mask[self.slot] = 1.0
+        self.padding = np.flatnonzero(self.mask == 0)
+        self.slot_cell = np.repeat(np.arange(nel), self.n_max)                   # cell and density of
+        self.slot_rho0 = np.ones(nel * self.n_max)                              # each padded slot
+        self.slot_rho0[self.slot] = p.rho0
         xi, mask = xi.reshape(nel, self.n_max, d), self.mask.reshape(nel, self.n_max)
         cells = np.arange(nel)
         mapping = self.basis.mapping
@@ -139,16 +143,13 @@ class ADERDGMPM(ADERDGFEM):
 
     def _law_cells(self, U):
         """The law at the particles on padded (..., nel, n_max, nc) arrays (padding stays zero):
-        one evaluation over every particle of every batch entry."""
+        one evaluation over every slot of every batch entry (padding slots hold U = 0, an
+        admissible input of every law, and are zeroed after), so no gather or scatter."""
         nc = U.shape[-1]
-        padded = U.reshape(-1, len(self.mask), nc)
-        n_rep = len(padded)
-        real = padded[:, self.slot].reshape(-1, nc)                          # (batch * n_particles, nc)
-        p = self.particles
-        Q = self.point_state(real, np.tile(p.cell, n_rep), np.tile(p.rho0, n_rep))
-        out = np.zeros_like(padded)
-        out[:, self.slot] = Q.reshape(n_rep, -1, nc)
-        return out.reshape(U.shape)
+        n_rep = U.size // (len(self.mask) * nc)
+        Q = self.point_state(U.reshape(-1, nc), np.tile(self.slot_cell, n_rep), np.tile(self.slot_rho0, n_rep))
+        Q.reshape(n_rep, len(self.mask), nc)[:, self.padding] = 0.0
+        return Q.reshape(U.shape)
 
     # ---------------------------------------------------------------- corrector and back-map
     def corrector(self, dofs, u_hat, q_hat, time, dt, source=None):

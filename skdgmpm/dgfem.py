@@ -134,11 +134,7 @@ class DGFEM(GodunovScheme):
         """Q from U pointwise: P = P(F) with each cell's law, v = p / rho0."""
         d = self.d
         F, p = system.split(U, d)
-        Q = np.empty_like(U)
-        P, v = system.split(Q, d)                          # views: written in place, no concatenation
-        P[...] = self.materials.stress(F, self.cell_material[cells])
-        np.divide(p, rho[:, None], out=v)
-        return Q
+        return system.primitive(self.materials.stress(F, self.cell_material[cells]), p, rho)
 
     def face_values(self, T, grid_state, cells):
         """Traces of U (and of Q when the state carries it, as the ADER predictor does; otherwise

@@ -176,7 +176,7 @@ class DGMPM(GodunovScheme):
         d = self.d
         F, p = system.split(U, d)
         P = self.materials.stress(F, self.cell_material[self.dof_cell])
-        return GridState(U, system.join(P, p / self.map.rho[:, None]))
+        return GridState(U, system.primitive(P, p, self.map.rho))
 
     def back_map(self, U_nodes):
         """(g) U_p = sum_i S_ip U_i [R18 eq 40] (PIC)."""

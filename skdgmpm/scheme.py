@@ -173,9 +173,8 @@ class GodunovScheme:
         (second order, so displacement errors measure the scheme, not the position update)."""
         d = self.d
         F, p = system.split(U, d)
-        v = p / self.particles.rho0[:, None]
-        P = self.materials.stress(F, self.particles.material)
-        new = ParticleState(state.t + dt, U, system.join(P, v), advance_positions(state, v, dt, d), state.step + 1)
+        Q = system.primitive(self.materials.stress(F, self.particles.material), p, self.particles.rho0)
+        new = ParticleState(state.t + dt, U, Q, advance_positions(state, Q[:, d * d:], dt, d), state.step + 1)
         self.check(new)
         return new
 

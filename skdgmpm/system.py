@@ -26,6 +26,24 @@ def join(T, v):
 
 
 @njit(cache=True)
+def _primitive(P, p, rho, Q):
+    n, d = p.shape
+    for k in range(n):
+        for i in range(d):
+            for a in range(d):
+                Q[k, i * d + a] = P[k, i, a]
+            Q[k, d * d + i] = p[k, i] / rho[k]
+
+
+def primitive(P, p, rho):
+    """Q = [P, v], v = p / rho0, from the stress P (n, d, d), momentum p (n, d) and density (n,):
+    one compiled pass (P and p may be strided views, e.g. a law's (n, 3, 3) output sliced)."""
+    Q = np.empty((len(p), n_components(p.shape[1])))
+    _primitive(P, p, np.asarray(rho, dtype=float), Q)
+    return Q
+
+
+@njit(cache=True)
 def _embed(F, F3):
     d = F.shape[1]
     for p in range(len(F)):
