@@ -138,7 +138,7 @@ class ADERDGMPM(ADERDGFEM):
         S = None if source is None else np.stack([self._padded(s) for s in source])   # P+1 time nodes
         u_hat, q_hat = self._picard(self._padded(U_particles), dt, self._law_cells, self.D_particles,
                                     self.grad_at_particles, S)
-        unpad = lambda a: a.reshape(len(self.tau), -1, a.shape[-1])[:, self.slot]
+        unpad = lambda a: a.reshape(len(self.tau), -1, a.shape[-1]).take(self.slot, axis=1)   # C order
         return unpad(u_hat), unpad(q_hat)
 
     def _law_cells(self, U):

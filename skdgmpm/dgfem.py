@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 from skfem import (CellBasis, ElementDG, ElementLineP1, ElementLineP2, ElementQuad1, ElementQuad2,
                    ElementQuadDG, ElementQuadP)
 
@@ -26,6 +27,20 @@ from .particles import Particles
 from .scheme import GodunovScheme, GridState, ParticleState, advance_positions
 
 INTEGRATORS = ("rk2", "rk4")
+
+
+@njit(cache=True)
+def _volume_term(indptr, indices, data, Q, alpha, d, out):
+    """out += D^T F_alpha(Q) for one CSR D (n_points, n_dofs) of weighted derivatives dPhi/dX_alpha,
+    scattered in point order as scipy's D.T @ F is: F-columns (j, alpha) get -v_j, p-columns
+    -P_j,alpha (no flux array is built)."""
+    dd = d * d
+    for q in range(len(indptr) - 1):
+        for k in range(indptr[q], indptr[q + 1]):
+            i, w = indices[k], data[k]
+            for j in range(d):
+                out[i, j * d + alpha] += w * -Q[q, dd + j]
+                out[i, dd + j] += w * -Q[q, j * d + alpha]
 
 
 def dg_element(d, order):
@@ -152,13 +167,12 @@ class DGFEM(GodunovScheme):
 
     def volume_flux_points(self, Q):
         """The volume term from Q at the Gauss points (n_points, ncomp)."""
-        d = self.d
-        P, v = system.split(Q, d)
         R = np.zeros((self.n_dofs, Q.shape[1]))
+        term = np.empty_like(R)
         for a, D in enumerate(self.D):
-            flux = np.zeros((len(Q), d, d))
-            flux[:, :, a] = -v
-            R += D.T @ system.join(flux, -P[:, :, a])
+            term[...] = 0.0
+            _volume_term(D.indptr, D.indices, D.data, Q, a, self.d, term)
+            R += term
         return R
 
     def source_integral(self, S):
