@@ -30,6 +30,21 @@ INTEGRATORS = ("rk2", "rk4")
 
 
 @njit(cache=True)
+def _apply_blocks(blocks, cell_dofs, R, out):
+    """out[dofs of c] = blocks[c] @ R[dofs of c] for every cell c: blocks (nel, nb, nb), cell_dofs
+    (nel, nb), R and out (n_dofs, nc) (a compiled loop: numpy's batched matmul on a gathered copy
+    cost ~4 ms a call at 128^2)."""
+    nb, nc = blocks.shape[1], R.shape[1]
+    for c in range(len(blocks)):
+        for k in range(nb):
+            for j in range(nc):
+                s = 0.0
+                for m in range(nb):
+                    s += blocks[c, k, m] * R[cell_dofs[c, m], j]
+                out[cell_dofs[c, k], j] = s
+
+
+@njit(cache=True)
 def _volume_term(indptr, indices, data, Q, alpha, d, out):
     """out += D^T F_alpha(Q) for one CSR D (n_points, n_dofs) of weighted derivatives dPhi/dX_alpha,
     scattered in point order as scipy's D.T @ F is: F-columns (j, alpha) get -v_j, p-columns
@@ -108,7 +123,7 @@ class DGFEM(GodunovScheme):
         self.B = _point_matrix(basis, phi)
         self.D = tuple(_point_matrix(basis, grad[:, a] * basis.dx[None]) for a in range(d))
         # the consistent mass is block diagonal (broken space): invert each cell's block once
-        self.cell_dofs = basis.element_dofs.T                                           # (nel, nb)
+        self.cell_dofs = np.ascontiguousarray(basis.element_dofs.T)                     # (nel, nb)
         dof_cell = np.empty(basis.N, dtype=np.int64)
         dof_local = np.empty(basis.N, dtype=np.int64)
         dof_cell[self.cell_dofs] = np.arange(nel)[:, None]
@@ -136,9 +151,8 @@ class DGFEM(GodunovScheme):
     # ---------------------------------------------------------------- operators
     def apply_mass_inverse(self, R):
         """M^-1 R with the per-cell inverse blocks."""
-        Rc = R[self.cell_dofs]                                   # (nel, nb, nc)
         out = np.empty_like(R)
-        out[self.cell_dofs] = np.matmul(self.mass_inv, Rc)
+        _apply_blocks(self.mass_inv, self.cell_dofs, R, out)
         return out
 
     def project(self, U_points):
