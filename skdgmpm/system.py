@@ -76,19 +76,24 @@ def normal_flux(traction, velocity, N):
 def _volume_flux(Q, indptr, indices, data, alpha, d, R):
     """R += K^alpha F_alpha(Q) for one CSR matrix K^alpha: F-rows (i, alpha) get -K v_i, p-rows
     -K P_i,alpha (each row's products summed in CSR order, as scipy's product does)."""
+    if d == 2:                          # a literal d: the loops unrolled
+        _volume_flux_d(Q, indptr, indices, data, alpha, R, 2)
+    else:
+        _volume_flux_d(Q, indptr, indices, data, alpha, R, d)
+
+
+@njit(cache=True, inline="always")
+def _volume_flux_d(Q, indptr, indices, data, alpha, R, d):
     dd = d * d
-    sv, sP = np.empty(d), np.empty(d)
     for r in range(len(indptr) - 1):
-        sv[:] = 0.0
-        sP[:] = 0.0
-        for k in range(indptr[r], indptr[r + 1]):
-            c, w = indices[k], data[k]
-            for i in range(d):
-                sv[i] += w * Q[c, dd + i]
-                sP[i] += w * Q[c, i * d + alpha]
-        for i in range(d):
-            R[r, i * d + alpha] -= sv[i]
-            R[r, dd + i] -= sP[i]
+        for i in range(d):              # scalar sums (a scratch array per row cost 2x)
+            sv, sP = 0.0, 0.0
+            for k in range(indptr[r], indptr[r + 1]):
+                w = data[k]
+                sv += w * Q[indices[k], dd + i]
+                sP += w * Q[indices[k], i * d + alpha]
+            R[r, i * d + alpha] -= sv
+            R[r, dd + i] -= sP
 
 
 def volume_flux(Q, stiffness, out=None):
