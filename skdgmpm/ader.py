@@ -70,7 +70,14 @@ def _picard_update(U0, T, div, dt, scale, u_hat, new):
     """One Picard update new[s] = U0[s] - dt sum_s' T[s, s'] div[s'] (U0 (1 or P+1, n, nc)
     broadcast over the time nodes; div, u_hat, new (P+1, n, nc)); returns the change
     max |new - u_hat| / scale (nan if any is nan), all in one pass."""
-    n_t, n, nc = new.shape
+    if new.shape[2] == 6:               # 2D: a literal number of components, the loop unrolled
+        return _picard_update_nc(U0, T, div, dt, scale, u_hat, new, 6)
+    return _picard_update_nc(U0, T, div, dt, scale, u_hat, new, new.shape[2])
+
+
+@njit(cache=True, inline="always")
+def _picard_update_nc(U0, T, div, dt, scale, u_hat, new, nc):
+    n_t, n = new.shape[0], new.shape[1]
     change, nan = 0.0, False
     for s in range(n_t):
         s0 = s if len(U0) > 1 else 0

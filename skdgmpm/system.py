@@ -27,8 +27,15 @@ def join(T, v):
 
 @njit(cache=True)
 def _primitive(P, p, rho, Q):
-    n, d = p.shape
-    for k in range(n):
+    if p.shape[1] == 2:                 # a literal d: the loops unrolled (2x faster)
+        _primitive_d(P, p, rho, Q, 2)
+    else:
+        _primitive_d(P, p, rho, Q, p.shape[1])
+
+
+@njit(cache=True, inline="always")
+def _primitive_d(P, p, rho, Q, d):
+    for k in range(len(p)):
         for i in range(d):
             for a in range(d):
                 Q[k, i * d + a] = P[k, i, a]
