@@ -49,6 +49,14 @@ def _volume_term(indptr, indices, data, Q, alpha, d, out):
     """out += D^T F_alpha(Q) for one CSR D (n_points, n_dofs) of weighted derivatives dPhi/dX_alpha,
     scattered in point order as scipy's D.T @ F is: F-columns (j, alpha) get -v_j, p-columns
     -P_j,alpha (no flux array is built)."""
+    if d == 2:                          # a literal d: the loops unrolled
+        _volume_term_d(indptr, indices, data, Q, alpha, out, 2)
+    else:
+        _volume_term_d(indptr, indices, data, Q, alpha, out, d)
+
+
+@njit(cache=True, inline="always")
+def _volume_term_d(indptr, indices, data, Q, alpha, out, d):
     dd = d * d
     for q in range(len(indptr) - 1):
         for k in range(indptr[q], indptr[q + 1]):

@@ -16,7 +16,14 @@ from skfem import FacetBasis, InteriorFacetBasis
 def _integrate(indptr, indices, data, measure, flux, out):
     """out[i] += T[f, i] (measure[f] flux[f]) for the CSR rows f of a trace T, in face order (as
     scipy's T.T @ (measure flux), without the temporaries)."""
-    nc = flux.shape[1]
+    if flux.shape[1] == 6:              # 2D states: a literal width, the loop unrolled
+        _integrate_nc(indptr, indices, data, measure, flux, out, 6)
+    else:
+        _integrate_nc(indptr, indices, data, measure, flux, out, flux.shape[1])
+
+
+@njit(cache=True, inline="always")
+def _integrate_nc(indptr, indices, data, measure, flux, out, nc):
     for f in range(len(indptr) - 1):
         for k in range(indptr[f], indptr[f + 1]):
             i, w = indices[k], data[k]

@@ -52,7 +52,14 @@ def primitive(P, p, rho):
 
 @njit(cache=True)
 def _embed(F, F3):
-    d = F.shape[1]
+    if F.shape[1] == 2:                 # a literal d: the loops unrolled
+        _embed_d(F, F3, 2)
+    else:
+        _embed_d(F, F3, F.shape[1])
+
+
+@njit(cache=True, inline="always")
+def _embed_d(F, F3, d):
     for p in range(len(F)):
         for i in range(3):
             for j in range(3):
