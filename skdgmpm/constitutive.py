@@ -6,16 +6,6 @@ import numpy as np
 from .system import embed
 
 
-def det_small(F):
-    """det of (n, d, d) matrices; closed form for d <= 2."""
-    d = F.shape[-1]
-    if d == 1:
-        return F[..., 0, 0].copy()
-    if d == 2:
-        return F[..., 0, 0] * F[..., 1, 1] - F[..., 0, 1] * F[..., 1, 0]
-    return np.linalg.det(F)
-
-
 @dataclass(frozen=True)
 class MaterialSet:
     """The scene's materials and, for a batch of points, which one applies (``index`` (n,))."""

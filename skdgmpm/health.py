@@ -11,8 +11,6 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from . import system
-from .constitutive import det_small
 from .riemann import _acoustic
 
 
@@ -105,14 +103,35 @@ def _acoustic_extremes_d(C, N, n_axes, lowest, highest, d):
         lowest[p], highest[p] = lo, hi
 
 
+@njit(cache=True)
+def _screen(U, Q, finite, F, J):
+    """Per point: finite = all of U and Q finite; F = U's deformation gradient there, I elsewhere;
+    J = det F (closed form for d <= 3), in one pass."""
+    d = F.shape[1]
+    for p in range(len(U)):
+        ok = True
+        for k in range(U.shape[1]):
+            ok = ok and np.isfinite(U[p, k]) and np.isfinite(Q[p, k])
+        finite[p] = ok
+        for i in range(d):
+            for a in range(d):
+                F[p, i, a] = U[p, i * d + a] if ok else (1.0 if i == a else 0.0)
+        f = F[p]
+        if d == 1:
+            J[p] = f[0, 0]
+        elif d == 2:
+            J[p] = f[0, 0] * f[1, 1] - f[0, 1] * f[1, 0]
+        else:
+            J[p] = (f[0, 0] * (f[1, 1] * f[2, 2] - f[1, 2] * f[2, 1]) + f[0, 1] * (f[1, 2] * f[2, 0] - f[1, 0] * f[2, 2])
+                    + f[0, 2] * (f[1, 0] * f[2, 1] - f[1, 1] * f[2, 0]))
+
+
 def assess(materials, points, U, Q):
     """`Health` of the state (U, Q) at ``points`` (with ``material``, ``rho0``) for a `MaterialSet`."""
     n, nc = U.shape
     d = int(round((-1 + np.sqrt(1 + 4 * nc)) / 2))                      # nc = d * d + d
-    finite = np.all(np.isfinite(U), axis=1) & np.all(np.isfinite(Q), axis=1)
-    F, _ = system.split(U, d)
-    F = np.where(finite[:, None, None], F, np.eye(d))
-    J = det_small(F)
+    finite, F, J = np.empty(n, dtype=np.bool_), np.empty((n, d, d)), np.empty(n)
+    _screen(U, Q, finite, F, J)
     C = materials.tangent(F, points.material)                           # (n, d, d, d, d)
     lowest, highest = np.empty(n), np.empty(n)
     _acoustic_extremes(C, directions(d), d, lowest, highest)

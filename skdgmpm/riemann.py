@@ -237,7 +237,7 @@ def _transverse_positives(w, C, n, rho, out):
 
 @njit(cache=True)
 def _transverse_scatter(w, C, rho, scale, normals, edge_int, edge_bnd, sign, corr_int, corr_bnd):
-    nc = w.shape[1]
+    nc = 6                                               # 2D only: a literal width, loops unrolled
     G = np.empty((2, nc))
     for f in range(len(w)):
         for e in range(2):
