@@ -128,17 +128,23 @@ def _godunov(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s, A, b, d):
 
 
 @njit(cache=True, inline="always")
-def _transverse_positive(w, C, n0, n1, rho, scale, out):
+def _stress_rate(w, C):
+    """M_ia = C_iajb w_jb of a fluctuation w (6,) in 2D, as four scalars (M00, M01, M10, M11):
+    the traction rate along n is g = M n, shared by every direction of one face."""
+    m = (C[0, 0, 0, 0] * w[0] + C[0, 0, 0, 1] * w[1] + C[0, 0, 1, 0] * w[2] + C[0, 0, 1, 1] * w[3],
+         C[0, 1, 0, 0] * w[0] + C[0, 1, 0, 1] * w[1] + C[0, 1, 1, 0] * w[2] + C[0, 1, 1, 1] * w[3],
+         C[1, 0, 0, 0] * w[0] + C[1, 0, 0, 1] * w[1] + C[1, 0, 1, 0] * w[2] + C[1, 0, 1, 1] * w[3],
+         C[1, 1, 0, 0] * w[0] + C[1, 1, 0, 1] * w[1] + C[1, 1, 1, 0] * w[2] + C[1, 1, 1, 1] * w[3])
+    return m
+
+
+@njit(cache=True, inline="always")
+def _transverse_positive(w, m, C, n0, n1, rho, scale, out):
     """scale B+_n w of one face into out (6,) (see `transverse_positive`), 2D only (the CTU
-    corrections are 2D): w (6,), C (2, 2, 2, 2), n = (n0, n1). False where the acoustic tensor
-    along n is not positive definite."""
-    n = (n0, n1)
-    g0, g1 = 0.0, 0.0                                    # g = (C : w_F) n
-    for a in range(2):
-        cw0 = C[0, a, 0, 0] * w[0] + C[0, a, 0, 1] * w[1] + C[0, a, 1, 0] * w[2] + C[0, a, 1, 1] * w[3]
-        cw1 = C[1, a, 0, 0] * w[0] + C[1, a, 0, 1] * w[1] + C[1, a, 1, 0] * w[2] + C[1, a, 1, 1] * w[3]
-        g0 += cw0 * n[a]
-        g1 += cw1 * n[a]
+    corrections are 2D): w (6,), m = `_stress_rate` (w, C), C (2, 2, 2, 2), n = (n0, n1). False
+    where the acoustic tensor along n is not positive definite."""
+    g0 = 0.0 + m[0] * n0 + m[1] * n1                     # g = (C : w_F) n
+    g1 = 0.0 + m[2] * n0 + m[3] * n1
     ok, z00, z01, z10, z11, i00, i01, i10, i11 = _sqrt_spd2(
         rho * _acoustic2(C, 0, 0, n0, n1), rho * _acoustic2(C, 0, 1, n0, n1),
         rho * _acoustic2(C, 1, 0, n0, n1), rho * _acoustic2(C, 1, 1, n0, n1))
@@ -230,7 +236,8 @@ def _godunov_fluxes(Q_L, C_L, rho_L, Q_R, C_R, rho_R, N, flux, fluct_L, fluct_R)
 @njit(cache=True)
 def _transverse_positives(w, C, n, rho, out):
     for f in range(len(n)):
-        if not _transverse_positive(w[f], C[f], n[f, 0], n[f, 1], rho[f], 1.0, out[f]):
+        m = _stress_rate(w[f], C[f])
+        if not _transverse_positive(w[f], m, C[f], n[f, 0], n[f, 1], rho[f], 1.0, out[f]):
             return f
     return -1
 
@@ -240,8 +247,10 @@ def _transverse_scatter(w, C, rho, scale, normals, edge_int, edge_bnd, sign, cor
     nc = 6                                               # 2D only: a literal width, loops unrolled
     G = np.empty((2, nc))
     for f in range(len(w)):
+        m = _stress_rate(w[f], C[f])
         for e in range(2):
-            if not _transverse_positive(w[f], C[f], normals[e, f, 0], normals[e, f, 1], rho[f], scale[f], G[e]):
+            n0, n1 = normals[e, f, 0], normals[e, f, 1]
+            if not _transverse_positive(w[f], m, C[f], n0, n1, rho[f], scale[f], G[e]):
                 return f
         for e in range(2):
             j = edge_int[e, f]
