@@ -1,10 +1,7 @@
 """skdgmpm: Discontinuous Galerkin Material Point Method for impacts on solids, on scikit-fem."""
 from pathlib import Path as _Path
 
-from .heap import retain_freed_memory as _retain_freed_memory
-
 __version__ = "0.1.0"
-_retain_freed_memory()              # temporaries reuse warm pages (skdgmpm.heap)
 
 # In a source checkout used without installing, forms/, materials/ and cases/ sit beside this
 # package: let them resolve as skdgmpm.forms, skdgmpm.materials, skdgmpm.cases as installed.

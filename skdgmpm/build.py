@@ -18,6 +18,7 @@ from .scene import exact_solution
 from .scheme import cell_values
 from .errors import InputError, InstabilityError
 from .grid import Grid, facets_in_box, line, load_mesh, rectangle
+from .heap import retain_freed_memory
 from .particles import Particles, fill_cells, locate, tensor_layout
 from skdgmpm.materials import make_material
 
@@ -112,6 +113,7 @@ def _material(scene, table, where):
 
 def build(scene):
     """Validate and discretise a scene: raises InputError before anything is computed."""
+    retain_freed_memory()           # a solver process from here on: step temporaries reuse warm pages
     d = scene.dim
     mesh = build_mesh(scene)
     materials = [_material(scene, scene.data["material"], "material")]

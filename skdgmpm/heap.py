@@ -7,17 +7,25 @@ and the kernel's zeroing of each page — about a third of a first-order DGMPM s
 (measured). Raising the mmap threshold to glibc's maximum (32 MiB on 64-bit) and the trim
 threshold keeps freed blocks for the next step. Peak memory is unchanged (the freed blocks are
 reused, not added); off glibc this is a no-op.
+
+It is process-wide, so it is applied when a scene is built (a solver process), not on import;
+SKDGMPM_KEEP_MALLOC=1 in the environment leaves glibc's defaults alone.
 """
 import ctypes
 import ctypes.util
+import functools
+import os
 
 M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3          # <malloc.h>
 MMAP_THRESHOLD = 32 * 2**20                          # glibc's upper bound on 64-bit
 TRIM_THRESHOLD = 2**30
 
 
+@functools.cache                                     # once per process (find_library runs ldconfig)
 def retain_freed_memory():
     """Set glibc's mmap and trim thresholds (see the module docstring); True where applied."""
+    if os.environ.get("SKDGMPM_KEEP_MALLOC") == "1":
+        return False
     name = ctypes.util.find_library("c")
     try:
         mallopt = ctypes.CDLL(name).mallopt
