@@ -28,7 +28,6 @@ def main():
     for name, overrides in CASES:
         best = None
         for _ in range(args.repeat):
-            t0 = time.perf_counter()
             r = run(name, overrides, progress=False)
             best = min(best or 1e9, r.wall_s)
         s = r.summary()
