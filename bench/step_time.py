@@ -6,7 +6,6 @@ Prints, per scene and variant: steps, wall time per step, particles, dofs, and t
 degree of freedom per step. Timings are measurements on the machine at hand, not test results.
 """
 import argparse
-import time
 
 from skdgmpm.run import run
 
