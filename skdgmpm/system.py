@@ -74,13 +74,6 @@ def embed(F):
     return F3
 
 
-def embed_vector(N):
-    """(n, d) -> (n, 3)."""
-    out = np.zeros((len(N), 3))
-    out[:, : N.shape[1]] = N
-    return out
-
-
 def normal_flux(traction, velocity, N):
     """F_N = -[v (x) N ; t] for traction t = P N and velocity v, all (n, d): returns (n, d*d + d)."""
     return -join(velocity[:, :, None] * N[:, None, :], traction)
