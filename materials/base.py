@@ -49,23 +49,19 @@ def _cofactor(F, cof, J):
 
 
 @njit(cache=True, inline="always")
-def _inverse_transpose(F, G):
-    """G = F^-T of one admissible (3, 3) F into G, as `admissible_inverse` computes it: returns
-    (ok, J) with ok = det F > 0; where not ok, G = I and J = 1 (the values at F = I)."""
+def _inverse_transpose(F):
+    """G = F^-T of one (3, 3) F as `admissible_inverse` computes it, as scalars: returns
+    (ok, J, G) with ok = det F > 0 and G the 9-tuple of G row-major; where not ok, G = I and
+    J = 1 (the values at F = I)."""
     a, b, c = F[0, 0], F[0, 1], F[0, 2]
     d, e, f = F[1, 0], F[1, 1], F[1, 2]
     g, h, i = F[2, 0], F[2, 1], F[2, 2]
     c00, c01, c02 = e * i - f * h, f * g - d * i, d * h - e * g
     J = a * c00 + b * c01 + c * c02
     if not J > 0.0:
-        for r in range(3):
-            for s in range(3):
-                G[r, s] = 1.0 if r == s else 0.0
-        return False, 1.0
-    G[0, 0], G[0, 1], G[0, 2] = c00 / J, c01 / J, c02 / J
-    G[1, 0], G[1, 1], G[1, 2] = (c * h - b * i) / J, (a * i - c * g) / J, (b * g - a * h) / J
-    G[2, 0], G[2, 1], G[2, 2] = (b * f - c * e) / J, (c * d - a * f) / J, (a * e - b * d) / J
-    return True, J
+        return False, 1.0, (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+    return True, J, (c00 / J, c01 / J, c02 / J, (c * h - b * i) / J, (a * i - c * g) / J, (b * g - a * h) / J,
+                     (b * f - c * e) / J, (c * d - a * f) / J, (a * e - b * d) / J)
 
 
 def cofactor(F):
@@ -104,8 +100,9 @@ class Material(ABC):
     rho : float
         Reference mass density rho0 (kg/m^3), > 0.
 
-    Subclasses implement `first_piola`, `tangent` and `energy`; acoustic tensor, wave speeds,
-    hyperbolicity and Cauchy stress follow from them.
+    Subclasses implement `first_piola`, `energy` and a compiled point tangent registered in
+    `materials.points` under their ``law_id`` (with ``law_parameters``); the batched tangent,
+    acoustic tensor, wave speeds, hyperbolicity and Cauchy stress follow from them.
     """
 
     E: float
@@ -138,18 +135,24 @@ class Material(ABC):
         """First Piola-Kirchhoff stress P(F), shape ``(..., 3, 3)`` (Pa)."""
 
     @abstractmethod
-    def tangent(self, F):
-        """Analytic tangent C = dP/dF, shape ``(..., 3, 3, 3, 3)`` (Pa)."""
-
-    @abstractmethod
     def energy(self, F):
         """Stored energy density W(F) per reference volume, shape ``(...,)`` (J/m^3); P = dW/dF."""
 
+    def tangent(self, F):
+        """Analytic tangent C = dP/dF, shape ``(..., 3, 3, 3, 3)`` (Pa)."""
+        return self.tangent_block(F, 3)
+
     def tangent_block(self, F, d):
         """The ``(..., d, d, d, d)`` block of the tangent at an *embedded* F (identity outside the
-        first d axes), the only part a d-dimensional system uses. Laws may override it with the
-        same formula on d x d arrays (much less work and memory in 1D/2D)."""
-        return self.tangent(F)[..., :d, :d, :d, :d]
+        first d axes), the only part a d-dimensional system uses: the law's compiled point
+        tangent (`materials.points`) looped over the points."""
+        from .points import tangent_block          # points imports every law, hence here
+        return tangent_block(self, F, d)
+
+    @property
+    def point_law(self):
+        """(law id, parameters) of the compiled point functions in `materials.points`."""
+        return self.law_id, np.array(self.law_parameters, dtype=float)
 
     # -- derived ------------------------------------------------------------------------------
     def acoustic_tensor(self, F, N):

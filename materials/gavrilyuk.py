@@ -4,10 +4,40 @@
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
-from .base import Material, _check_parameter, admissible_inverse, cofactor
+from .base import Material, _check_parameter, _inverse_transpose, admissible_inverse, cofactor
 
-_I = np.eye(3)
+
+@njit(cache=True, inline="always")
+def tangent_point(F, prm, C, d):
+    """The d-block C (d, d, d, d) of the tangent at one embedded F (3, 3) (I where J <= 0, as
+    `admissible_inverse`); prm = (kappa, w1, w2). See `Gavrilyuk` for the formula."""
+    kappa, w1, w2 = prm[0], prm[1], prm[2]
+    ok, J, G = _inverse_transpose(F)
+    I1 = 0.0
+    for i in range(3):
+        for a in range(3):
+            f = F[i, a] if ok else (1.0 if i == a else 0.0)
+            I1 += f * f
+    s = J ** (-2 / 3)
+    I1b = s * I1
+    c_vol, c_vol_x = kappa * ((2 * J - 1) * J), kappa * ((J - 1) * J)
+    c_iso = w1 + 2 * w2 * I1b
+    for i in range(d):
+        for a in range(d):
+            F_ia = F[i, a] if ok else (1.0 if i == a else 0.0)
+            G_ia = G[3 * i + a]
+            dI_ia = s * (2 * F_ia - 2 / 3 * I1 * G_ia)
+            for j in range(d):
+                for b in range(d):
+                    F_jb = F[j, b] if ok else (1.0 if j == b else 0.0)
+                    G_jb, G_ib, G_ja = G[3 * j + b], G[3 * i + b], G[3 * j + a]
+                    GG, GG_x = G_ia * G_jb, G_ib * G_ja
+                    d2I1b = s * (-2 / 3 * (2 * (F_ia * G_jb) - 2 / 3 * I1 * GG) + 2.0 * ((i == j) * (a == b))
+                                 - 4 / 3 * (G_ia * F_jb) + 2 / 3 * I1 * GG_x)
+                    dI_jb = s * (2 * F_jb - 2 / 3 * I1 * G_jb)
+                    C[i, a, j, b] = (c_vol * GG - c_vol_x * GG_x) + c_iso * d2I1b + 2 * w2 * (dI_ia * dI_jb)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -27,7 +57,7 @@ class Gavrilyuk(Material):
     P = kappa (J - 1) H + (w1 + 2 w2 I1b) dI1b/dF with H = J F^-T (cofactor), w1 = -mu a / 2,
     w2 = mu (1 + a) / 12 and dI1b/dF = J^(-2/3) (2F - 2/3 I1 G), G = F^-T. The tangent
     differentiates once more (dG_ia/dF_jb = -G_ib G_ja). Like the neo-Hookean law, states with
-    J <= 0 give the values at F = I and `is_hyperbolic` returns False.
+    J <= 0 give the values at F = I and `is_hyperbolic` returns False (tangent: `tangent_point`).
     Shapes as in `skdgmpm.materials.base`.
     """
 
@@ -55,21 +85,11 @@ class Gavrilyuk(Material):
         return ((self.bulk * (J - 1.0) * J)[..., None, None] * G
                 + (w1 + 2 * w2 * I1b)[..., None, None] * dI1b)
 
-    def tangent(self, F):
-        F, J, G, I1, I1b, dI1b, _ = self._kinematics(F)
-        w1, w2 = self._weights
-        s = lambda x: x[..., None, None, None, None]           # noqa: E731 (scalar -> 4th order)
-        e = np.einsum
-        GG_x = e("...ib,...ja->...iajb", G, G)                 # G_ib G_ja
-        GG = e("...ia,...jb->...iajb", G, G)                   # G_ia G_jb
-        # volumetric: d(kappa (J - 1) J G) = kappa [(2J - 1) J G_ia G_jb - (J - 1) J G_ib G_ja]
-        vol = self.bulk * (s((2 * J - 1) * J) * GG - s((J - 1) * J) * GG_x)
-        # d2 I1b: derivative of f (2F - 2/3 I1 G) with f = J^(-2/3), df/dF = -2/3 f G
-        d2I1b = s(J ** (-2 / 3)) * (-2 / 3 * (2 * e("...ia,...jb->...iajb", F, G) - 2 / 3 * s(I1) * GG)
-                                    + 2 * e("ij,ab->iajb", _I, _I)
-                                    - 4 / 3 * e("...ia,...jb->...iajb", G, F) + 2 / 3 * s(I1) * GG_x)
-        return (vol + s(w1 + 2 * w2 * I1b) * d2I1b
-                + 2 * w2 * e("...ia,...jb->...iajb", dI1b, dI1b))
+    law_id = 3
+
+    @property
+    def law_parameters(self):
+        return (self.bulk, *self._weights)
 
     def energy(self, F):
         F, J, G, I1, I1b, dI1b, ok = self._kinematics(F)

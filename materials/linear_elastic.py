@@ -3,10 +3,23 @@
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from .base import Material
 
 _I = np.eye(3)
+
+
+@njit(cache=True, inline="always")
+def tangent_point(F, prm, C, d):
+    """C_iajb = lam delta_ia delta_jb + mu (delta_ij delta_ab + delta_ib delta_aj), the same at
+    every F: the d-block into C (d, d, d, d); prm = (mu, lam)."""
+    mu, lam = prm[0], prm[1]
+    for i in range(d):
+        for a in range(d):
+            for j in range(d):
+                for b in range(d):
+                    C[i, a, j, b] = lam * ((i == a) * (j == b)) + mu * ((i == j) * (a == b) + (i == b) * (a == j))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -26,16 +39,11 @@ class LinearElastic(Material):
         tr = np.trace(eps, axis1=-2, axis2=-1)
         return self.lam * tr[..., None, None] * _I + 2.0 * self.mu * eps
 
-    def tangent(self, F):
-        F = np.asarray(F, dtype=float)
-        C = (self.lam * np.einsum("ia,jb->iajb", _I, _I)
-             + self.mu * (np.einsum("ij,ab->iajb", _I, _I) + np.einsum("ib,aj->iajb", _I, _I)))
-        return np.broadcast_to(C, F.shape[:-2] + (3, 3, 3, 3)).copy()
+    law_id = 1
 
-    def tangent_block(self, F, d):
-        # constant: one (d, d, d, d) tensor broadcast (read-only) over the batch
-        C = self.tangent(np.eye(3))[:d, :d, :d, :d]
-        return np.broadcast_to(C, np.shape(F)[:-2] + (d, d, d, d))
+    @property
+    def law_parameters(self):
+        return (self.mu, self.lam)
 
     def energy(self, F):
         eps = self._strain(F)

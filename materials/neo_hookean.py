@@ -12,41 +12,29 @@ from .base import Material, _inverse_transpose, admissible_inverse, cofactor
 def _first_piola(F, mu, lam, P):
     """P = mu (F - G) + lam ln(J) G, G = F^-T, at every point: F (n, 3, 3) into P (n, 3, 3)
     (one compiled loop with the kinematics: the numpy chain cost ~10 passes over the points)."""
-    G = np.empty((3, 3))
     for p in range(len(F)):
-        ok, J = _inverse_transpose(F[p], G)
+        ok, J, G = _inverse_transpose(F[p])
         lam_lnJ = lam * np.log(J)
         for i in range(3):
             for a in range(3):
                 f = F[p, i, a] if ok else (1.0 if i == a else 0.0)
-                P[p, i, a] = mu * (f - G[i, a]) + lam_lnJ * G[i, a]
-
-
-@njit(cache=True)
-def _tangent(F, mu, lam, C):
-    """C_iajb = mu delta_ij delta_ab + c G_ib G_ja + lam G_ia G_jb, c = mu - lam ln J, at every
-    point: F (n, 3, 3) into the d-block C (n, d, d, d, d) (a compiled loop: numpy's 4th-order
-    temporaries cost ~1 us a point)."""
-    if C.shape[1] == 2:                 # a literal d: the loops unrolled
-        _tangent_d(F, mu, lam, C, 2)
-    else:
-        _tangent_d(F, mu, lam, C, C.shape[1])
+                P[p, i, a] = mu * (f - G[3 * i + a]) + lam_lnJ * G[3 * i + a]
 
 
 @njit(cache=True, inline="always")
-def _tangent_d(F, mu, lam, C, d):
-    # an embedded F is block diagonal (F33 = 1), so is G = F^-T: the d-block of C only involves
-    # the d-block of G
-    G = np.empty((3, 3))
-    for p in range(len(F)):
-        _, J = _inverse_transpose(F[p], G)
-        c = mu - lam * np.log(J)
-        for i in range(d):
-            for a in range(d):
-                for j in range(d):
-                    for b in range(d):
-                        C[p, i, a, j, b] = (mu * ((i == j) * (a == b)) + c * (G[i, b] * G[j, a])
-                                            + lam * (G[i, a] * G[j, b]))
+def tangent_point(F, prm, C, d):
+    """C_iajb = mu delta_ij delta_ab + c G_ib G_ja + lam G_ia G_jb, c = mu - lam ln J, of one
+    embedded F (3, 3) into the d-block C (d, d, d, d); prm = (mu, lam). An embedded F is block
+    diagonal (F33 = 1), so is G = F^-T: the d-block of C only involves the d-block of G."""
+    mu, lam = prm[0], prm[1]
+    _, J, G = _inverse_transpose(F)
+    c = mu - lam * np.log(J)
+    for i in range(d):
+        for a in range(d):
+            for j in range(d):
+                for b in range(d):
+                    C[i, a, j, b] = (mu * ((i == j) * (a == b)) + c * (G[3 * i + b] * G[3 * j + a])
+                                     + lam * (G[3 * i + a] * G[3 * j + b]))
 
 
 def _points(F):
@@ -69,6 +57,12 @@ class NeoHookean(Material):
     how callers must detect an inverted element. Shapes as in `skdgmpm.materials.base`.
     """
 
+    law_id = 0
+
+    @property
+    def law_parameters(self):
+        return (self.mu, self.lam)
+
     def _kinematics(self, F):
         F, G, J, ok = admissible_inverse(F)
         return F, G, np.log(J), ok
@@ -78,15 +72,6 @@ class NeoHookean(Material):
         P = np.empty_like(F)
         _first_piola(F, self.mu, self.lam, P)
         return P.reshape(shape + (3, 3))
-
-    def tangent(self, F):
-        return self.tangent_block(F, 3)
-
-    def tangent_block(self, F, d):
-        F, shape = _points(F)
-        C = np.empty((len(F), d, d, d, d))
-        _tangent(F, self.mu, self.lam, C)
-        return C.reshape(shape + (d, d, d, d))
 
     def energy(self, F):
         Fs, _, lnJ, ok = self._kinematics(F)

@@ -3,10 +3,36 @@
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from .base import Material
 
 _I = np.eye(3)
+
+
+@njit(cache=True, inline="always")
+def tangent_point(F, prm, C, d):
+    """C_iajb = delta_ij S_ab + lam F_ia F_jb + mu (delta_ab B_ij + F_ib F_ja), S the second
+    Piola stress, B = F F^T, of one embedded F (3, 3) into the d-block C (d, d, d, d);
+    prm = (mu, lam). S and B of an embedded F are block diagonal (E33 = 0), tr E is the 3D one."""
+    mu, lam = prm[0], prm[1]
+    trE = 0.0
+    for a in range(3):
+        s = 0.0
+        for k in range(3):
+            s += F[k, a] * F[k, a]
+        trE += 0.5 * (s - 1.0)
+    for i in range(d):
+        for a in range(d):
+            for j in range(d):
+                for b in range(d):
+                    FtF, FFt = 0.0, 0.0
+                    for k in range(3):
+                        FtF += F[k, a] * F[k, b]
+                        FFt += F[i, k] * F[j, k]
+                    S_ab = lam * trE * (a == b) + 2.0 * mu * (0.5 * (FtF - (a == b)))
+                    C[i, a, j, b] = ((i == j) * S_ab + lam * (F[i, a] * F[j, b])
+                                     + mu * ((a == b) * FFt + F[i, b] * F[j, a]))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -32,26 +58,11 @@ class SaintVenantKirchhoff(Material):
         F = np.asarray(F, dtype=float)
         return F @ self._second_piola(F)
 
-    def tangent(self, F):
-        F = np.asarray(F, dtype=float)
-        S = self._second_piola(F)
-        B = F @ np.swapaxes(F, -1, -2)
-        return (np.einsum("ij,...ab->...iajb", _I, S)
-                + self.lam * np.einsum("...ia,...jb->...iajb", F, F)
-                + self.mu * (np.einsum("...ij,ab->...iajb", B, _I)
-                             + np.einsum("...ib,...ja->...iajb", F, F)))
+    law_id = 2
 
-    def tangent_block(self, F, d):
-        # S and B of an embedded F are block diagonal (E33 = 0): the d-block is the same formula
-        # on d x d arrays
-        F = np.asarray(F, dtype=float)
-        S = self._second_piola(F)[..., :d, :d]
-        B = (F @ np.swapaxes(F, -1, -2))[..., :d, :d]
-        F, Id = F[..., :d, :d], np.eye(d)
-        return (np.einsum("ij,...ab->...iajb", Id, S)
-                + self.lam * np.einsum("...ia,...jb->...iajb", F, F)
-                + self.mu * (np.einsum("...ij,ab->...iajb", B, Id)
-                             + np.einsum("...ib,...ja->...iajb", F, F)))
+    @property
+    def law_parameters(self):
+        return (self.mu, self.lam)
 
     def energy(self, F):
         E = self._green_lagrange(np.asarray(F, dtype=float))

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from skdgmpm.materials.points import law_table, tangent_point
 from .riemann import _acoustic
 
 
@@ -71,70 +72,66 @@ class Health:
 
 
 @njit(cache=True)
-def _acoustic_extremes(C, N, n_axes, lowest, highest):
-    """Eigenvalues of the symmetrised acoustic tensors of every point (C (n, d, d, d, d)) along
-    the directions N (n_dir, d): the smallest over all of them into ``lowest`` (n,), the largest
-    over the first ``n_axes`` into ``highest`` (n,). Closed form for d <= 2, LAPACK otherwise."""
+def _assess(U, Q, material, laws, params, rho, N, n_axes, finite, J, lowest, speed):
+    """Per point p: finite = all of U and Q finite; J = det F (1 where not finite); the
+    eigenvalues of the symmetrised acoustic tensors of the tangent at F (I where not finite) along
+    the directions N (n_dir, d): the smallest over all of them into ``lowest`` (nan where not
+    finite), the fastest wave sqrt(largest / rho) over the first ``n_axes`` into ``speed``. One
+    pass: the law's point tangent (`materials.points`), closed forms for d <= 2."""
     if N.shape[1] == 2:                 # a literal d: the (d, d) loops unrolled
-        _acoustic_extremes_d(C, N, n_axes, lowest, highest, 2)
+        _assess_d(U, Q, material, laws, params, rho, N, n_axes, finite, J, lowest, speed, 2)
     else:
-        _acoustic_extremes_d(C, N, n_axes, lowest, highest, N.shape[1])
+        _assess_d(U, Q, material, laws, params, rho, N, n_axes, finite, J, lowest, speed, N.shape[1])
 
 
 @njit(cache=True, inline="always")
-def _acoustic_extremes_d(C, N, n_axes, lowest, highest, d):
+def _assess_d(U, Q, material, laws, params, rho, N, n_axes, finite, J, lowest, speed, d):
+    F = np.empty((3, 3))
+    C = np.empty((d, d, d, d))
     A = np.empty((d, d))
-    for p in range(C.shape[0]):
+    for p in range(len(U)):
+        ok = True
+        for k in range(U.shape[1]):
+            ok = ok and np.isfinite(U[p, k]) and np.isfinite(Q[p, k])
+        finite[p] = ok
+        for i in range(3):              # embedded F, I where not finite
+            for a in range(3):
+                F[i, a] = U[p, i * d + a] if ok and i < d and a < d else (1.0 if i == a else 0.0)
+        if d == 1:
+            J[p] = F[0, 0]
+        elif d == 2:
+            J[p] = F[0, 0] * F[1, 1] - F[0, 1] * F[1, 0]
+        else:
+            J[p] = (F[0, 0] * (F[1, 1] * F[2, 2] - F[1, 2] * F[2, 1]) + F[0, 1] * (F[1, 2] * F[2, 0] - F[1, 0] * F[2, 2])
+                    + F[0, 2] * (F[1, 0] * F[2, 1] - F[1, 1] * F[2, 0]))
+        m = material[p]
+        tangent_point(laws[m], params[m], F, C, d)
         lo, hi = np.inf, -np.inf
         for k in range(N.shape[0]):
-            _acoustic(C[p], N[k], 1.0, A, d)
+            _acoustic(C, N[k], 1.0, A, d)
             if d == 1:
                 small = large = A[0, 0]
             elif d == 2:
-                m = 0.5 * (A[0, 0] + A[1, 1])
+                mean = 0.5 * (A[0, 0] + A[1, 1])
                 r = np.hypot(0.5 * (A[0, 0] - A[1, 1]), 0.5 * (A[0, 1] + A[1, 0]))
-                small, large = m - r, m + r
+                small, large = mean - r, mean + r
             else:
                 omega = np.linalg.eigvalsh(0.5 * (A + A.T))
                 small, large = omega[0], omega[-1]
             lo = min(lo, small)
             if k < n_axes:
                 hi = max(hi, large)
-        lowest[p], highest[p] = lo, hi
-
-
-@njit(cache=True)
-def _screen(U, Q, finite, F, J):
-    """Per point: finite = all of U and Q finite; F = U's deformation gradient there, I elsewhere;
-    J = det F (closed form for d <= 3), in one pass."""
-    d = F.shape[1]
-    for p in range(len(U)):
-        ok = True
-        for k in range(U.shape[1]):
-            ok = ok and np.isfinite(U[p, k]) and np.isfinite(Q[p, k])
-        finite[p] = ok
-        for i in range(d):
-            for a in range(d):
-                F[p, i, a] = U[p, i * d + a] if ok else (1.0 if i == a else 0.0)
-        f = F[p]
-        if d == 1:
-            J[p] = f[0, 0]
-        elif d == 2:
-            J[p] = f[0, 0] * f[1, 1] - f[0, 1] * f[1, 0]
-        else:
-            J[p] = (f[0, 0] * (f[1, 1] * f[2, 2] - f[1, 2] * f[2, 1]) + f[0, 1] * (f[1, 2] * f[2, 0] - f[1, 0] * f[2, 2])
-                    + f[0, 2] * (f[1, 0] * f[2, 1] - f[1, 1] * f[2, 0]))
+        lowest[p] = lo if ok else np.nan
+        speed[p] = np.sqrt(max(hi, 0.0) / rho[m])
 
 
 def assess(materials, points, U, Q):
-    """`Health` of the state (U, Q) at ``points`` (with ``material``, ``rho0``) for a `MaterialSet`."""
+    """`Health` of the state (U, Q) at ``points`` (with ``material``) for a `MaterialSet`."""
     n, nc = U.shape
     d = int(round((-1 + np.sqrt(1 + 4 * nc)) / 2))                      # nc = d * d + d
-    finite, F, J = np.empty(n, dtype=np.bool_), np.empty((n, d, d)), np.empty(n)
-    _screen(U, Q, finite, F, J)
-    C = materials.tangent(F, points.material)                           # (n, d, d, d, d)
-    lowest, highest = np.empty(n), np.empty(n)
-    _acoustic_extremes(C, directions(d), d, lowest, highest)
-    rho = np.array([m.rho for m in materials.materials])[points.material]
-    speed = np.sqrt(np.clip(highest, 0.0, None) / rho)
-    return Health(finite, np.where(finite, J, 1.0), np.where(finite, lowest, np.nan), speed)
+    laws, params = law_table(materials.materials)
+    rho = np.array([m.rho for m in materials.materials])
+    finite, J, lowest, speed = np.empty(n, dtype=np.bool_), np.empty(n), np.empty(n), np.empty(n)
+    _assess(U, Q, np.asarray(points.material, dtype=np.int64), laws, params, rho, directions(d), d,
+            finite, J, lowest, speed)
+    return Health(finite, np.where(finite, J, 1.0), lowest, speed)

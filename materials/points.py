@@ -1,0 +1,57 @@
+"""Compiled point laws: one material's tangent at one point, chosen by the law's ``law_id``.
+
+Kernels that loop over points or faces themselves (the DGMPM face and particle passes, the health
+check) evaluate the law inside their loop through `tangent_point`; a set of materials is handed
+to them as a table (`law_table`): one row of (law id, parameters) per material.
+"""
+import numpy as np
+from numba import njit
+
+from . import gavrilyuk, linear_elastic, neo_hookean, saint_venant_kirchhoff
+
+N_PARAMETERS = 4        # the widest law_parameters
+
+
+@njit(cache=True, inline="always")
+def tangent_point(law, prm, F, C, d):
+    """d-block C (d, d, d, d) of the tangent of law ``law`` with parameters ``prm`` at one
+    embedded F (3, 3)."""
+    if law == 0:
+        neo_hookean.tangent_point(F, prm, C, d)
+    elif law == 1:
+        linear_elastic.tangent_point(F, prm, C, d)
+    elif law == 2:
+        saint_venant_kirchhoff.tangent_point(F, prm, C, d)
+    else:
+        gavrilyuk.tangent_point(F, prm, C, d)
+
+
+def law_table(materials):
+    """(law ids (n_mat,), parameters (n_mat, N_PARAMETERS)) of a sequence of materials."""
+    laws = np.array([m.law_id for m in materials], dtype=np.int64)
+    params = np.zeros((len(materials), N_PARAMETERS))
+    for k, m in enumerate(materials):
+        params[k, : len(m.law_parameters)] = m.law_parameters
+    return laws, params
+
+
+@njit(cache=True)
+def _tangents(law, prm, F, C):
+    d = C.shape[1]
+    if d == 2:                          # a literal d: the loops unrolled
+        for p in range(len(F)):
+            tangent_point(law, prm, F[p], C[p], 2)
+    else:
+        for p in range(len(F)):
+            tangent_point(law, prm, F[p], C[p], d)
+
+
+def tangent_block(material, F, d):
+    """The (..., d, d, d, d) block of the tangent of ``material`` at embedded F (..., 3, 3)."""
+    F = np.asarray(F, dtype=float)
+    shape = F.shape[:-2]
+    flat = np.ascontiguousarray(F.reshape(-1, 3, 3))
+    law, prm = material.point_law
+    C = np.empty((len(flat), d, d, d, d))
+    _tangents(law, prm, flat, C)
+    return C.reshape(shape + (d, d, d, d))
