@@ -6,8 +6,10 @@ One step is the list of named stages of R18 §5 (a)-(h):
     -> source -> advance -> back_map -> constitutive_update
 
 ``advance`` is forward Euler [R18 eq 20] or Heun's RK2 with both stages on the grid [R18 §7.1]
-(the second stage evaluates the law at the grid nodes). ``transverse_flux`` adds the CTU
-corrections of R18 §4.4 in 2D (``transverse="ctu"``); DCU leaves it out. ``source`` adds
+(the second stage evaluates the law at the grid nodes). The CTU corrections of R18 §4.4 (2D,
+``transverse="ctu"``) are computed in the same compiled pass over the faces as the Godunov fluxes
+(`skdgmpm.dgmpm_kernels`): each fluctuation is split as soon as it is known, and
+``transverse_flux`` only filters the boundary faces' corrections; DCU leaves them out. ``source`` adds
 int Phi rho0 b = sum_p S_ip V_p rho0 b(X_p, t) when a body force is set (particle quadrature, at
 the time the boundary values are taken).
 """
@@ -15,11 +17,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from skdgmpm.materials.points import law_table
+
 from . import system
+from .dgmpm_kernels import boundary_pass, boundary_sides, integrate_faces, interior_pass
 from .errors import InputError
 from .faces import interior_faces
 from .quadrature import ParticleMap, VolumeOperators, interpolation_matrix, particle_basis
-from .riemann import transverse_fluxes
+from .riemann import _not_hyperbolic
 from .scheme import GodunovScheme, GridState, cell_values
 
 
@@ -69,13 +74,20 @@ class DGMPM(GodunovScheme):
         self.interior = interior_faces(g.submesh, g.element)
         self._setup_boundary(g.element)
         self._setup_transverse()
+        self.laws = law_table(self.materials.materials)          # the compiled point laws
+        self.traces = {"L": _csr(self.interior.T_L), "R": _csr(self.interior.T_R),
+                       "boundary": _csr(self.boundary.T_L)}
 
     # ---------------------------------------------------------------- set-up
     def _setup_transverse(self):
-        """CTU topology: for each face and side, the source cell's two edges adjacent to the face
-        (axis 0 of the (2, nf) arrays), with their outward normals and their index among interior
-        faces (with the sign of the interior normal) or boundary faces (-1 where not one)."""
+        """CTU topology: for each face side ("L", "R" of the interior faces, "boundary"), the
+        source cell's size across the face h and its two edges adjacent to the face (axis 0 of
+        the (2, nf) arrays), with their outward normals and their index among interior faces
+        (with the sign of the interior normal) or boundary faces (-1 where not one). DCU: empty."""
+        empty = (np.zeros(0), np.zeros((2, 0, 2)), np.zeros((2, 0), np.int64), np.zeros((2, 0), np.int64),
+                 np.zeros((2, 0)))
         self.ctu = None
+        self.topology = {"L": empty, "R": empty, "boundary": empty}
         if self.transverse != "ctu" or self.d != 2:
             return
         m = self.grid.submesh
@@ -83,25 +95,24 @@ class DGMPM(GodunovScheme):
         pos_int[self.interior.facets] = np.arange(len(self.interior))
         pos_bnd = -np.ones(m.nfacets, dtype=np.int64)
         pos_bnd[self.boundary.facets] = np.arange(len(self.boundary))
-        self.ctu = []
-        for kind, faces in (("interior", self.interior), ("boundary", self.boundary)):
-            sides = (("L", faces.cell_L), ("R", faces.cell_R)) if kind == "interior" else (("L", faces.cell_L),)
-            for side, cells in sides:
-                k = np.argmax(m.t2f[:, cells] == faces.facets[None, :], axis=0)
-                j = m.t2f[(k[None, :] + np.array([1, 3])[:, None]) % 4, cells[None, :]]     # (2, nf)
-                j_int, j_bnd = pos_int[j], pos_bnd[j]
-                sign = np.where(self.interior.cell_L[j_int] == cells, 1.0, -1.0)
-                n = np.where((j_int >= 0)[..., None], sign[..., None] * self.interior.normal[j_int],
-                             self.boundary.normal[j_bnd])
-                h = self.cell_volume[cells] / faces.measure
-                self.ctu.append((kind, side, h, (n, j_int, j_bnd, sign)))
+        for side, faces, cells in (("L", self.interior, self.interior.cell_L),
+                                   ("R", self.interior, self.interior.cell_R),
+                                   ("boundary", self.boundary, self.boundary.cell_L)):
+            k = np.argmax(m.t2f[:, cells] == faces.facets[None, :], axis=0)
+            j = m.t2f[(k[None, :] + np.array([1, 3])[:, None]) % 4, cells[None, :]]     # (2, nf)
+            j_int, j_bnd = pos_int[j], pos_bnd[j]
+            sign = np.where(self.interior.cell_L[j_int] == cells, 1.0, -1.0)
+            n = np.where((j_int >= 0)[..., None], sign[..., None] * self.interior.normal[j_int],
+                         self.boundary.normal[j_bnd])
+            h = self.cell_volume[cells] / faces.measure
+            self.topology[side] = tuple(np.ascontiguousarray(a) for a in (h, n, j_int, j_bnd, sign))
         frame = np.zeros((len(self.boundary), 2, 2))
         free_v = np.zeros((len(self.boundary), 2), bool)
         free_t = np.zeros((len(self.boundary), 2), bool)
         for sel, bc in self.bc_groups:
             frame[sel], imp_v, imp_t = bc.constraints(self.boundary.normal[sel])
             free_v[sel], free_t[sel] = ~imp_v, ~imp_t
-        self.ctu_boundary = (frame, free_v, free_t)
+        self.ctu = (frame, free_v, free_t)
 
     # ---------------------------------------------------------------- stages
     def project(self, state):
@@ -115,41 +126,72 @@ class DGMPM(GodunovScheme):
         """(c) sum_alpha K^alpha F_alpha(Q) (added to ``out`` if given)."""
         return system.volume_flux(grid_state.Q, self.ops.stiffness, out)
 
-    def transverse_flux(self, interior, boundary, dt):
-        """CTU [R18 eq 34-37]: each fluctuation entering a cell is split on the characteristic
-        basis of the cell's two edges adjacent to the source face; the part moving out through an
-        edge becomes the extra flux G = -dt / (2 h) B+ A dU there (h: cell size across the source
-        face). Returns corrections of the interior and boundary face fluxes.
+    def interface_flux(self, grid_state, dt, flux, corr_bnd):
+        """(e) Godunov fluxes at interior faces from the linearised Riemann solver, added to flux
+        (nf, nc), with (CTU) the transverse corrections of both sides' fluctuations (into flux and
+        corr_bnd): one compiled pass."""
+        f = self.interior
+        bad = interior_pass(self.traces["L"], self.traces["R"], grid_state.U, grid_state.Q, self.map.rho,
+                            f.normal, f.cell_L, f.cell_R, self.cell_material, *self.laws,
+                            dt, self.ctu is not None, self.topology["L"], self.topology["R"], flux, corr_bnd)
+        if bad >= 0:
+            _not_hyperbolic(bad)
 
-        At a boundary edge the ghost cell is a copy of the cell (it sends back the cell's own
-        correction through the opposite edge), and only the components the boundary condition
-        leaves free are changed, so the condition still holds exactly.
-        """
-        corr_int = np.zeros_like(interior.flux)
-        corr_bnd = np.zeros_like(boundary.flux)
-        if self.ctu is None:
-            return corr_int, corr_bnd
-        for kind, side, h, (n, j_int, j_bnd, sign) in self.ctu:
-            fs = interior if kind == "interior" else boundary
-            w = fs.fluct_L if side == "L" else fs.fluct_R
-            C = fs.C_L if side == "L" else fs.C_R
-            rho = fs.rho_L if side == "L" else fs.rho_R
-            transverse_fluxes(w, C, rho, -dt / (2.0 * h), n, j_int, j_bnd, sign, corr_int, corr_bnd)
-        return corr_int, self._free_part(corr_bnd)
+    def boundary_flux(self, grid_state, time, dt, flux_int, corr_bnd):
+        """(d) ghost states -> boundary stationary states (t*, v*) and fluxes (nb, nc), with (CTU)
+        the transverse corrections of the fluctuations entering the boundary cells; returns the
+        fluxes and the stationary states."""
+        b, d = self.boundary, self.d
+        nb = len(b)
+        t_L, v_L, Z, rho = np.empty((nb, d)), np.empty((nb, d)), np.empty((nb, d, d)), np.empty(nb)
+        C = np.empty((nb, d, d, d, d))
+        bad = boundary_sides(self.traces["boundary"], grid_state.U, grid_state.Q, self.map.rho, b.normal,
+                             b.cell_L, self.cell_material, *self.laws, t_L, v_L, Z, C, rho)
+        if bad >= 0:
+            _not_hyperbolic(bad)
+        t_s, v_s = t_L.copy(), v_L.copy()
+        for sel, bc in self.bc_groups:
+            t_s[sel], v_s[sel] = bc.star(time, t_L[sel], v_L[sel], Z[sel], b.normal[sel])
+        flux = np.zeros((nb, system.n_components(d)))
+        bad = boundary_pass(b.normal, t_L, v_L, t_s, v_s, C, rho, dt, self.ctu is not None, self.topology["boundary"],
+                            flux, flux_int, corr_bnd)
+        if bad >= 0:
+            _not_hyperbolic(bad)
+        return flux, t_s, v_s
 
-    def _free_part(self, flux):
-        """Keep the components of a boundary flux correction that the condition leaves free."""
-        frame, free_v, free_t = self.ctu_boundary
-        F, p = system.split(flux, self.d)
+    def transverse_flux(self, corr_bnd):
+        """CTU [R18 eq 34-37] at boundary faces: keep the components of the corrections that the
+        condition leaves free, so it still holds exactly. (Each fluctuation entering a cell is split
+        on the characteristic basis of the cell's two edges adjacent to the source face; the part
+        moving out through an edge becomes the extra flux G = -dt / (2 h) B+ A dU there, h the cell
+        size across the source face; at a boundary edge the ghost cell is a copy of the cell and
+        sends back the cell's own correction through the opposite edge. The face passes integrate
+        the interior edges' corrections and collect the boundary edges' in ``corr_bnd``.)"""
+        frame, free_v, free_t = self.ctu
+        F, p = system.split(corr_bnd, self.d)
         dv = np.einsum("fkj,fja,fa->fk", frame, F, self.boundary.normal) * free_v
         dt_ = np.einsum("fkj,fj->fk", frame, p) * free_t
         return system.join(np.einsum("fkj,fk->fj", frame, dv)[:, :, None] * self.boundary.normal[:, None, :],
                            np.einsum("fkj,fk->fj", frame, dt_))
 
-    def face_values(self, T, grid_state, cells):
-        """Side-averaged Q, F and density on a face set (Q projected from the particles)."""
-        d = self.d
-        return T @ grid_state.Q, (T @ grid_state.U)[:, : d * d].reshape(-1, d, d), T @ self.map.rho
+    def surface_residual(self, grid_state, time, dt):
+        """-int Phi F_N* over all faces; also returns the power through the boundary (W)."""
+        b, nc = self.boundary, grid_state.U.shape[1]
+        flux_int, corr_bnd = np.zeros((len(self.interior), nc)), np.zeros((len(b), nc))
+        self.interface_flux(grid_state, dt, flux_int, corr_bnd)
+        flux, t_s, v_s = self.boundary_flux(grid_state, time, dt, flux_int, corr_bnd)
+        if self.ctu is None:
+            power = float(np.sum(b.measure * np.einsum("fi,fi->f", t_s, v_s)))
+        else:                                               # work of the corrected boundary flux
+            flux = flux + self.transverse_flux(corr_bnd)
+            F, p = system.split(flux, self.d)
+            v = -np.einsum("fia,fa->fi", F, b.normal)
+            power = float(np.sum(b.measure * np.einsum("fi,fi->f", -p, v)))
+        R = np.zeros((self.n_dofs, nc))
+        integrate_faces(self.traces["L"], self.interior.measure, -1.0, flux_int, R)
+        integrate_faces(self.traces["R"], self.interior.measure, 1.0, flux_int, R)
+        integrate_faces(self.traces["boundary"], b.measure, -1.0, flux, R)
+        return R, power
 
     def residual(self, grid_state, time, dt):
         """M dU/dt = K^alpha F_alpha - int Phi F_N* + int Phi S; also returns the boundary power (W)."""
@@ -191,3 +233,8 @@ class DGMPM(GodunovScheme):
             return self.constitutive_update(state, self.back_map(U_nodes), dt), work
 
         return self.step_with_cfl_guard(state, dt_max, attempt)
+
+
+def _csr(T):
+    """(indptr, indices, data) of a CSR matrix, as the compiled passes take a trace."""
+    return (T.indptr, T.indices, T.data)

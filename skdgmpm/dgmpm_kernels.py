@@ -1,0 +1,208 @@
+"""Compiled face passes of first-order DGMPM: one loop over a face set per right-hand side.
+
+For every face the pass gathers the side states through the trace operators (CSR rows, summed
+in scipy's order), evaluates each side's tangent with the law's point function
+(`skdgmpm.materials.points`), solves the linearised Riemann problem (`skdgmpm.riemann` point
+functions) and, for CTU, splits each fluctuation on the characteristic basis of the two edges of
+the cell it enters as soon as it is known, adding those corrections to the edges' fluxes. Only
+the face fluxes (nf, nc) are stored; `integrate_faces` then adds -int Phi F* to the residual.
+
+Face-set arrays as in `skdgmpm.faces` ((nf, d) normals, (nf,) measures); a trace is the triple
+(indptr, indices, data) of its CSR matrix; a CTU topology of one face side is
+(h (nf,), normals (2, nf, 2), interior edge (2, nf), boundary edge (2, nf), sign (2, nf)) as built
+by `DGMPM._setup_transverse` (empty arrays for DCU).
+"""
+import numpy as np
+from numba import njit
+
+from skdgmpm.materials.points import tangent_point
+
+from .riemann import _acoustic, _godunov, _sqrt_spd, _stress_rate, _transverse_positive
+
+
+# ---------------------------------------------------------------- point pieces (one face side)
+@njit(cache=True, inline="always")
+def _gather(trace, f, U, Q, rho, q, F, d):
+    """Row f of a trace applied to Q (into q (nc,)), to U's F part (into the embedded F (3, 3))
+    and to rho (returned), each row's products summed in CSR order as scipy's product does."""
+    indptr, indices, data = trace
+    nc = q.shape[0]
+    for c in range(nc):
+        q[c] = 0.0
+    for i in range(3):
+        for a in range(3):
+            F[i, a] = 0.0 if i < d and a < d else (1.0 if i == a else 0.0)
+    r = 0.0
+    for k in range(indptr[f], indptr[f + 1]):
+        n, w = indices[k], data[k]
+        for c in range(nc):
+            q[c] += w * Q[n, c]
+        for i in range(d):
+            for a in range(d):
+                F[i, a] += w * U[n, i * d + a]
+        r += w * rho[n]
+    return r
+
+
+@njit(cache=True, inline="always")
+def _integrate(trace, f, scale, value, R):
+    """R[i] += T[f, i] (scale value) over row f of a trace."""
+    indptr, indices, data = trace
+    for k in range(indptr[f], indptr[f + 1]):
+        n, w = indices[k], data[k]
+        for c in range(value.shape[0]):
+            R[n, c] += w * (scale * value[c])
+
+
+@njit(cache=True, inline="always")
+def _split(w, C, rho, dt, topo, f, G, flux_int, corr_bnd):
+    """CTU [R18 eq 34-37] of the fluctuation w (6,) entering a cell through face f: G_e =
+    -dt / (2 h) B+_n w for the cell's two edges e adjacent to the face; an interior edge j gets
+    sign G_e added to its flux flux_int[j], a boundary edge j gets G_e - G_(1-e) into corr_bnd[j]
+    (its ghost cell, a copy of the cell, sends back the opposite edge's part). False where the
+    acoustic tensor along an edge is not positive definite."""
+    h, normals, edge_int, edge_bnd, sign = topo
+    scale = -dt / (2.0 * h[f])
+    m = _stress_rate(w, C)              # C : w_F, shared by the two edges
+    for e in range(2):
+        if not _transverse_positive(w, m, C, normals[e, f, 0], normals[e, f, 1], rho, scale, G[e]):
+            return False
+    for e in range(2):
+        j = edge_int[e, f]
+        if j >= 0:
+            for k in range(6):
+                flux_int[j, k] += sign[e, f] * G[e, k]
+        j = edge_bnd[e, f]
+        if j >= 0:
+            for k in range(6):
+                corr_bnd[j, k] += G[e, k] - G[1 - e, k]
+    return True
+
+
+@njit(cache=True, inline="always")
+def _face_flux(t_s, v_s, N, flux, d):
+    """F_N = -[v* (x) N ; t*] of one face added to flux (nc,)."""
+    for i in range(d):
+        for a in range(d):
+            flux[i * d + a] += -(v_s[i] * N[a])
+        flux[d * d + i] += -t_s[i]
+
+
+# ---------------------------------------------------------------- interior faces
+@njit(cache=True)
+def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
+                  dt, ctu, topo_L, topo_R, flux, corr_bnd):
+    """Godunov flux of every interior face added to flux (nf, nc) (zero on entry) with, for
+    ``ctu``, the transverse corrections of both sides' fluctuations (into flux and corr_bnd).
+    Returns the first face whose acoustic tensor is not positive definite, or -1."""
+    if N.shape[1] == 2:                 # a literal d: the (d, d) loops unrolled
+        return _interior_d(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
+                           dt, ctu, topo_L, topo_R, flux, corr_bnd, 2)
+    return _interior_d(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
+                       dt, ctu, topo_L, topo_R, flux, corr_bnd, N.shape[1])
+
+
+@njit(cache=True, inline="always")
+def _interior_d(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
+                dt, ctu, topo_L, topo_R, flux, corr_bnd, d):
+    dd, nc = d * d, d * d + d
+    q_L, q_R, w_L, w_R = np.empty(nc), np.empty(nc), np.empty(nc), np.empty(nc)
+    F_L, F_R = np.empty((3, 3)), np.empty((3, 3))
+    C_L, C_R = np.empty((d, d, d, d)), np.empty((d, d, d, d))
+    M, Z_L, Z_R, Zi, A = np.empty((d, d)), np.empty((d, d)), np.empty((d, d)), np.empty((d, d)), np.empty((d, d))
+    b, t_L, t_R, t_s, v_s = np.empty(d), np.empty(d), np.empty(d), np.empty(d), np.empty(d)
+    G = np.empty((2, nc))
+    for f in range(len(N)):
+        rho_L = _gather(T_L, f, U, Q, rho, q_L, F_L, d)
+        rho_R = _gather(T_R, f, U, Q, rho, q_R, F_R, d)
+        m_L, m_R = cell_material[cell_L[f]], cell_material[cell_R[f]]
+        tangent_point(laws[m_L], params[m_L], F_L, C_L, d)
+        tangent_point(laws[m_R], params[m_R], F_R, C_R, d)
+        for i in range(d):                               # traction t = P N of each side
+            sL, sR = 0.0, 0.0
+            for a in range(d):
+                sL += q_L[i * d + a] * N[f, a]
+                sR += q_R[i * d + a] * N[f, a]
+            t_L[i], t_R[i] = sL, sR
+        v_L, v_R = q_L[dd:], q_R[dd:]
+        _acoustic(C_L, N[f], rho_L, M, d)
+        if not _sqrt_spd(M, Z_L, Zi, d):
+            return f
+        _acoustic(C_R, N[f], rho_R, M, d)
+        if not _sqrt_spd(M, Z_R, Zi, d):
+            return f
+        _godunov(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s, A, b, d)
+        _face_flux(t_s, v_s, N[f], flux[f], d)
+        if ctu:                                          # fluctuations A- dQ into L, A+ dQ into R
+            for i in range(d):
+                for a in range(d):
+                    k = i * d + a
+                    w_L[k] = -(v_s[i] * N[f, a]) + v_L[i] * N[f, a]
+                    w_R[k] = -(v_R[i] * N[f, a]) + v_s[i] * N[f, a]
+                w_L[dd + i] = -t_s[i] + t_L[i]
+                w_R[dd + i] = -t_R[i] + t_s[i]
+            if not _split(w_L, C_L, rho_L, dt, topo_L, f, G, flux, corr_bnd):
+                return f
+            if not _split(w_R, C_R, rho_R, dt, topo_R, f, G, flux, corr_bnd):
+                return f
+    return -1
+
+
+# ---------------------------------------------------------------- boundary faces
+@njit(cache=True)
+def boundary_sides(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v_L, Z, C, rho_f):
+    """Interior side of every boundary face: traction t_L, velocity v_L (nf, d), impedance
+    Z = sqrt(rho0 A_N) (nf, d, d), tangent C (nf, d, d, d, d) and density rho_f (nf,). Returns the
+    first face whose acoustic tensor is not positive definite, or -1."""
+    if N.shape[1] == 2:
+        return _boundary_sides_d(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v_L, Z, C, rho_f, 2)
+    return _boundary_sides_d(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v_L, Z, C, rho_f,
+                             N.shape[1])
+
+
+@njit(cache=True, inline="always")
+def _boundary_sides_d(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v_L, Z, C, rho_f, d):
+    dd, nc = d * d, d * d + d
+    q, F, M, Zi = np.empty(nc), np.empty((3, 3)), np.empty((d, d)), np.empty((d, d))
+    for f in range(len(N)):
+        rho_f[f] = _gather(T, f, U, Q, rho, q, F, d)
+        m = cell_material[cell[f]]
+        tangent_point(laws[m], params[m], F, C[f], d)
+        for i in range(d):
+            s = 0.0
+            for a in range(d):
+                s += q[i * d + a] * N[f, a]
+            t_L[f, i], v_L[f, i] = s, q[dd + i]
+        _acoustic(C[f], N[f], rho_f[f], M, d)
+        if not _sqrt_spd(M, Z[f], Zi, d):
+            return f
+    return -1
+
+
+@njit(cache=True)
+def boundary_pass(N, t_L, v_L, t_s, v_s, C, rho_f, dt, ctu, topo, flux, flux_int, corr_bnd):
+    """Flux F_N(t*, v*) of every boundary face added to flux (nf, nc) (zero on entry) and, with
+    ``ctu``, the transverse corrections of the fluctuation F_N(t*, v*) - F_N(t_L, v_L) entering
+    the cell (into the interior fluxes flux_int and corr_bnd). Returns the first face whose
+    acoustic tensor along an edge is not positive definite, or -1."""
+    d = N.shape[1]
+    dd, nc = d * d, d * d + d
+    w, G = np.empty(nc), np.empty((2, nc))
+    for f in range(len(N)):
+        _face_flux(t_s[f], v_s[f], N[f], flux[f], d)
+        if ctu:
+            for i in range(d):
+                for a in range(d):
+                    w[i * d + a] = flux[f, i * d + a] + v_L[f, i] * N[f, a]
+                w[dd + i] = flux[f, dd + i] + t_L[f, i]
+            if not _split(w, C[f], rho_f[f], dt, topo, f, G, flux_int, corr_bnd):
+                return f
+    return -1
+
+
+@njit(cache=True)
+def integrate_faces(T, measure, scale, flux, R):
+    """R += scale T^T (measure flux): the surface integral of face-constant fluxes (nf, nc), in
+    face order."""
+    for f in range(len(measure)):
+        _integrate(T, f, scale * measure[f], flux[f], R)
