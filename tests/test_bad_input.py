@@ -328,6 +328,7 @@ def test_loss_of_hyperbolicity_svk(capsys, here):
                           "--set", "grid.cells=20", "--out", out, "--quiet")
     stop, summary = check_stopped_run(rc, err, out)
     assert "loss of hyperbolicity" in summary["message"]
+    assert f"{summary['steps']} steps to t = {summary['t_final']:.6g} s" in stdout     # reached, not t_end
     assert "unstable" in stdout
 
 
