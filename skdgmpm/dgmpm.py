@@ -117,10 +117,7 @@ class DGMPM(GodunovScheme):
     # ---------------------------------------------------------------- stages
     def project(self, state):
         """(a) M_i U_i = sum_p S_ip V_p U_p; Q likewise (v from the projected momentum)."""
-        U = self.map.project(state.U)
-        Q = self.map.project(state.Q)
-        Q[:, self.d * self.d:] = U[:, self.d * self.d:] / self.map.rho[:, None]
-        return GridState(U, Q)
+        return GridState(*self.map.project_state(state.U, state.Q, self.d))
 
     def volume_flux(self, grid_state, out=None):
         """(c) sum_alpha K^alpha F_alpha(Q) (added to ``out`` if given)."""

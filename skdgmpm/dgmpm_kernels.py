@@ -17,7 +17,7 @@ from numba import njit
 
 from skdgmpm.materials.points import tangent_point
 
-from .riemann import _acoustic, _godunov, _sqrt_spd, _stress_rate, _transverse_positive
+from .riemann import _acoustic, _acoustic2, _godunov, _sqrt_spd, _sqrt_spd2, _stress_rate
 
 
 # ---------------------------------------------------------------- point pieces (one face side)
@@ -55,6 +55,21 @@ def _integrate(trace, f, scale, value, R):
 
 
 @njit(cache=True, inline="always")
+def _edge_split(w, m, n0, n1, rho, scale, Z, out):
+    """scale B+_n w of one fluctuation w (6,) along the edge normal n = (n0, n1) into out (6,),
+    as `riemann.transverse_positive` with m = C : w_F and Z = (sqrt(rho A_n), its inverse) given
+    (Z is shared by the two opposite edges of a cell, A_n being quadratic in n)."""
+    z00, z01, z10, z11, i00, i01, i10, i11 = Z
+    g0 = 0.0 + m[0] * n0 + m[1] * n1                     # g = (C : w_F) n
+    g1 = 0.0 + m[2] * n0 + m[3] * n1
+    a0 = 0.5 * ((i00 * g0 + i01 * g1) - w[4] / rho)
+    a1 = 0.5 * ((i10 * g0 + i11 * g1) - w[5] / rho)
+    out[0], out[1], out[2], out[3] = scale * (a0 * n0), scale * (a0 * n1), scale * (a1 * n0), scale * (a1 * n1)
+    out[4] = scale * (-0.5 * g0 + 0.5 * (z00 * w[4] + z01 * w[5]) / rho)
+    out[5] = scale * (-0.5 * g1 + 0.5 * (z10 * w[4] + z11 * w[5]) / rho)
+
+
+@njit(cache=True, inline="always")
 def _split(w, C, rho, dt, topo, f, G, flux_int, corr_bnd):
     """CTU [R18 eq 34-37] of the fluctuation w (6,) entering a cell through face f: G_e =
     -dt / (2 h) B+_n w for the cell's two edges e adjacent to the face; an interior edge j gets
@@ -64,9 +79,17 @@ def _split(w, C, rho, dt, topo, f, G, flux_int, corr_bnd):
     h, normals, edge_int, edge_bnd, sign = topo
     scale = -dt / (2.0 * h[f])
     m = _stress_rate(w, C)              # C : w_F, shared by the two edges
+    Z = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     for e in range(2):
-        if not _transverse_positive(w, m, C, normals[e, f, 0], normals[e, f, 1], rho, scale, G[e]):
-            return False
+        n0, n1 = normals[e, f, 0], normals[e, f, 1]
+        if e == 0 or not (n0 == -normals[0, f, 0] and n1 == -normals[0, f, 1]):
+            ok, z00, z01, z10, z11, i00, i01, i10, i11 = _sqrt_spd2(
+                rho * _acoustic2(C, 0, 0, n0, n1), rho * _acoustic2(C, 0, 1, n0, n1),
+                rho * _acoustic2(C, 1, 0, n0, n1), rho * _acoustic2(C, 1, 1, n0, n1))
+            if not ok:
+                return False
+            Z = (z00, z01, z10, z11, i00, i01, i10, i11)
+        _edge_split(w, m, n0, n1, rho, scale, Z, G[e])
     for e in range(2):
         j = edge_int[e, f]
         if j >= 0:

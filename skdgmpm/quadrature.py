@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 from skfem import CellBasis
 
 from skdgmpm import forms
@@ -67,7 +68,8 @@ class VolumeOperators:
     ----------
     mass : (n_dofs, n_dofs) consistent mass, ``int Phi_i Phi_j`` (volume-weighted)
     lumped : (n_dofs,) row sums of ``mass`` [R18 eq 38]
-    stiffness : list of d sparse (n_dofs, n_dofs), K^alpha [R18 eq 38]
+    stiffness : list of d sparse (n_dofs, n_dofs), K^alpha [R18 eq 38], all on one sparsity
+        pattern (explicit zeros kept) so that one compiled pass reads them together
     """
 
     mass: sp.csr_matrix
@@ -77,9 +79,27 @@ class VolumeOperators:
     @classmethod
     def assemble(cls, basis):
         mass = forms.mass.assemble(basis).tocsr()
-        stiffness = tuple(forms.pseudo_stiffness(a).assemble(basis).tocsr()
-                          for a in range(basis.mesh.dim()))
+        stiffness = common_pattern([forms.pseudo_stiffness(a).assemble(basis).tocsr()
+                                    for a in range(basis.mesh.dim())])
         return cls(mass, np.asarray(mass.sum(axis=1)).ravel(), stiffness)
+
+
+def common_pattern(matrices):
+    """The CSR matrices on the union of their sparsity patterns (explicit zeros kept, indices
+    sorted): the same ``indptr`` and ``indices`` arrays, one ``data`` each."""
+    coo = [K.tocoo() for K in matrices]
+    rows = np.concatenate([c.row for c in coo])
+    cols = np.concatenate([c.col for c in coo])
+    out = []
+    for k in range(len(coo)):
+        data = np.concatenate([c.data if j == k else np.zeros_like(c.data) for j, c in enumerate(coo)])
+        K = sp.csr_matrix((data, (rows, cols)), shape=matrices[k].shape)    # duplicates summed, zeros kept
+        K.sort_indices()
+        if out:                                       # the same arrays, not copies
+            assert np.array_equal(K.indices, out[0].indices) and np.array_equal(K.indptr, out[0].indptr)
+            K.indices, K.indptr = out[0].indices, out[0].indptr
+        out.append(K)
+    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -107,5 +127,32 @@ class ParticleMap:
     def project(self, values):
         return self.P2G @ values
 
+    def project_state(self, U, Q, d):
+        """Nodal (U, Q) from particle (U, Q) (n, d*d + d): U and the stress by `project`, the
+        nodal velocity from the projected momentum (v = p / rho), in one compiled pass."""
+        U_n, Q_n = np.empty((self.P2G.shape[0], U.shape[1])), np.empty((self.P2G.shape[0], Q.shape[1]))
+        _project_state(self.P2G.indptr, self.P2G.indices, self.P2G.data, U, Q, self.rho, d * d, U_n, Q_n)
+        return U_n, Q_n
+
     def interpolate(self, nodal):
         return self.S @ nodal
+
+
+@njit(cache=True)
+def _project_state(indptr, indices, data, U, Q, rho, dd, U_n, Q_n):
+    """U_n = P2G U, Q_n = [P2G P, p_n / rho] (each row's products summed in CSR order, as
+    scipy's product does)."""
+    nc = U.shape[1]
+    for r in range(len(indptr) - 1):
+        for c in range(nc):
+            U_n[r, c] = 0.0
+        for c in range(dd):
+            Q_n[r, c] = 0.0
+        for k in range(indptr[r], indptr[r + 1]):
+            p, w = indices[k], data[k]
+            for c in range(nc):
+                U_n[r, c] += w * U[p, c]
+            for c in range(dd):
+                Q_n[r, c] += w * Q[p, c]
+        for c in range(dd, nc):
+            Q_n[r, c] = U_n[r, c] / rho[r]

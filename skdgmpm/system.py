@@ -80,33 +80,48 @@ def normal_flux(traction, velocity, N):
 
 
 @njit(cache=True)
-def _volume_flux(Q, indptr, indices, data, alpha, d, R):
-    """R += K^alpha F_alpha(Q) for one CSR matrix K^alpha: F-rows (i, alpha) get -K v_i, p-rows
-    -K P_i,alpha (each row's products summed in CSR order, as scipy's product does)."""
+def _volume_flux(Q, indptr, indices, data, alphas, d, R):
+    """R += sum_j K^alpha_j F_alpha_j(Q) for CSR matrices K^alpha_j sharing one pattern (data: a
+    tuple of their data arrays, alphas: their alpha): F-rows (i, alpha) get -K^alpha v_i, p-rows
+    -K^alpha P_i,alpha, each row's products summed in CSR order as scipy's product does and
+    subtracted in the order of the matrices."""
     if d == 2:                          # a literal d: the loops unrolled
-        _volume_flux_d(Q, indptr, indices, data, alpha, R, 2)
+        _volume_flux_d(Q, indptr, indices, data, alphas, R, 2)
     else:
-        _volume_flux_d(Q, indptr, indices, data, alpha, R, d)
+        _volume_flux_d(Q, indptr, indices, data, alphas, R, d)
 
 
 @njit(cache=True, inline="always")
-def _volume_flux_d(Q, indptr, indices, data, alpha, R, d):
-    dd = d * d
+def _volume_flux_d(Q, indptr, indices, data, alphas, R, d):
+    dd, m = d * d, len(data)
+    sv, sP = np.empty((m, d)), np.empty((m, d))
     for r in range(len(indptr) - 1):
-        for i in range(d):              # scalar sums (a scratch array per row cost 2x)
-            sv, sP = 0.0, 0.0
-            for k in range(indptr[r], indptr[r + 1]):
-                w = data[k]
-                sv += w * Q[indices[k], dd + i]
-                sP += w * Q[indices[k], i * d + alpha]
-            R[r, i * d + alpha] -= sv
-            R[r, dd + i] -= sP
+        for j in range(m):
+            for i in range(d):
+                sv[j, i], sP[j, i] = 0.0, 0.0
+        for k in range(indptr[r], indptr[r + 1]):    # the row read once for all the matrices
+            n = indices[k]
+            for j in range(m):
+                w, alpha = data[j][k], alphas[j]
+                for i in range(d):
+                    sv[j, i] += w * Q[n, dd + i]
+                    sP[j, i] += w * Q[n, i * d + alpha]
+        for j in range(m):
+            for i in range(d):
+                R[r, i * d + alphas[j]] -= sv[j, i]
+                R[r, dd + i] -= sP[j, i]
 
 
 def volume_flux(Q, stiffness, out=None):
     """sum_alpha K^alpha F_alpha(Q) for nodal Q (n_dofs, d*d + d) [R18 eq 19] (CSR stiffness
-    matrices), added to ``out`` if given; one compiled pass over each K^alpha."""
+    matrices), added to ``out`` if given; one compiled pass over the rows for matrices that
+    share their pattern arrays (`quadrature.common_pattern`), one per matrix otherwise."""
     R = np.zeros_like(Q) if out is None else out
-    for alpha, K in enumerate(stiffness):
-        _volume_flux(Q, K.indptr, K.indices, K.data, alpha, len(stiffness), R)
+    d = len(stiffness)
+    K0 = stiffness[0]
+    if all(K.indptr is K0.indptr and K.indices is K0.indices for K in stiffness):
+        _volume_flux(Q, K0.indptr, K0.indices, tuple(K.data for K in stiffness), tuple(range(d)), d, R)
+    else:
+        for alpha, K in enumerate(stiffness):
+            _volume_flux(Q, K.indptr, K.indices, (K.data,), (alpha,), d, R)
     return R
