@@ -27,28 +27,37 @@ step); the corrector adds int Phi S at the Gauss points at the same time nodes.
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
 from numba import njit
 from numpy.polynomial import legendre
 
+from skdgmpm.materials.points import law_table
+
+from . import system
+from .ader_kernels import interior_flux_sum, traces
 from .dgfem import DGFEM
-from .scheme import GridState
+from .riemann import _not_hyperbolic
 
 
 @njit(cache=True)
 def _divergence_cells(Q, D, out):
-    """out[b, c] = sum_alpha D[alpha, c] F_alpha(Q[b, c]) for per-cell point values Q (B, nel, n, nc)
+    """out[r, c] = sum_alpha D[alpha, c] F_alpha(Q[r, c]) for per-cell point values Q (R, nel, n, nc)
     and derivative matrices D (d, nel, n, n): F-rows (i, alpha) get -D_alpha v_i, p-rows
-    -sum_alpha D_alpha P_i,alpha (a compiled loop: numpy's batched matmul on (n, n) blocks and
-    strided columns cost ~100 ns a block)."""
-    if D.shape[0] == 2:                 # a literal d: the (d, d) loops unrolled
-        _divergence_cells_d(Q, D, out, 2)
+    -sum_alpha D_alpha P_i,alpha."""
+    d, n = D.shape[0], Q.shape[2]
+    if d == 2 and n == 4:               # literal sizes (Q1 cells, 2 x 2 particles): loops unrolled
+        _divergence_cells_dn(Q, D, out, 2, 4)
+    elif d == 2 and n == 9:             # Q2 cells, 3 x 3 particles
+        _divergence_cells_dn(Q, D, out, 2, 9)
+    elif d == 2:
+        _divergence_cells_dn(Q, D, out, 2, n)
     else:
-        _divergence_cells_d(Q, D, out, D.shape[0])
+        _divergence_cells_dn(Q, D, out, d, n)
 
 
 @njit(cache=True, inline="always")
-def _divergence_cells_d(Q, D, out, d):
-    dd, n = d * d, Q.shape[2]
+def _divergence_cells_dn(Q, D, out, d, n):
+    dd = d * d
     for b in range(Q.shape[0]):
         for c in range(Q.shape[1]):
             for k in range(n):
@@ -67,32 +76,47 @@ def _divergence_cells_d(Q, D, out, d):
 
 @njit(cache=True)
 def _picard_update(U0, T, div, dt, scale, u_hat, new):
-    """One Picard update new[s] = U0[s] - dt sum_s' T[s, s'] div[s'] (U0 (1 or P+1, n, nc)
-    broadcast over the time nodes; div, u_hat, new (P+1, n, nc)); returns the change
-    max |new - u_hat| / scale (nan if any is nan), all in one pass."""
-    if new.shape[2] == 6:               # 2D: a literal number of components, the loop unrolled
+    """One Picard update new[s] = U0[s] - dt sum_r T[s, r] div[r] and the change
+    max |new - u_hat| / scale (nan if any is nan). Flat arrays: div (R, M), new (S, M), U0 and
+    u_hat (S or 1, M) (one row: the same at every node), M = n_points nc; scale (nc,)."""
+    if len(scale) == 6:                 # 2D: a literal state width
         return _picard_update_nc(U0, T, div, dt, scale, u_hat, new, 6)
-    return _picard_update_nc(U0, T, div, dt, scale, u_hat, new, new.shape[2])
+    return _picard_update_nc(U0, T, div, dt, scale, u_hat, new, len(scale))
 
 
 @njit(cache=True, inline="always")
 def _picard_update_nc(U0, T, div, dt, scale, u_hat, new, nc):
-    n_t, n = new.shape[0], new.shape[1]
-    change, nan = 0.0, False
-    for s in range(n_t):
-        s0 = s if len(U0) > 1 else 0
-        for j in range(n):
-            for c in range(nc):
-                acc = 0.0
-                for r in range(n_t):
-                    acc += T[s, r] * div[r, j, c]
-                x = U0[s0, j, c] - dt * acc
-                new[s, j, c] = x
-                ch = abs(x - u_hat[s, j, c]) / scale[c]
-                if ch > change:
-                    change = ch
-                nan = nan or ch != ch
-    return np.nan if nan else change
+    n_points = new.shape[1] // nc
+    big = np.zeros(nc)                  # max |new - u_hat| per component, nan once one is nan
+    for s in range(len(new)):
+        out, U0_s, u_s = new[s], U0[s if len(U0) > 1 else 0], u_hat[s if len(u_hat) > 1 else 0]
+        out[:] = 0.0
+        for r in range(len(div)):       # the time nodes outermost: plain loops over the points
+            t, div_r = T[s, r], div[r]  # vectorise (a short inner sum over r does not)
+            for j in range(len(out)):
+                out[j] += t * div_r[j]
+        for j in range(len(out)):
+            out[j] = U0_s[j] - dt * out[j]
+        for p in range(n_points):
+            for v in range(nc):
+                x = abs(out[p * nc + v] - u_s[p * nc + v])
+                if x > big[v] or x != x:
+                    big[v] = x
+    change = 0.0
+    for v in range(nc):
+        x = big[v] / scale[v]
+        if x != x:
+            return np.nan
+        change = max(change, x)
+    return change
+
+
+def _time_sum(w, a):
+    """sum_s w[s] a[s] over the time nodes (the leading axis)."""
+    out = w[0] * a[0]
+    for s in range(1, len(w)):
+        out += w[s] * a[s]
+    return out
 
 
 def time_matrices(order):
@@ -154,17 +178,30 @@ class ADERDGFEM(DGFEM):
         self.nq = nq
         if not self.picard_max:
             self.picard_max = 2 * self.order + 2
+        # the corrector's operators from the predictor's points (here the Gauss points) to the
+        # facet rows and to the volume term, built once: point values -> coefficients -> traces
+        to_dofs = sp.csr_matrix((self.B_inv.ravel(), (np.repeat(self.cell_dofs, nq, axis=1).ravel(),
+                                                       np.tile(np.arange(nel * nq).reshape(nel, 1, nq),
+                                                               (1, self.nb, 1)).ravel())),
+                                shape=(self.n_dofs, nel * nq))
+        self.set_point_operators([(T @ to_dofs).tocsr() for T in self._face_traces()], sp.identity(nel * nq).tocsr())
+
+    def _face_traces(self):
+        """DG trace operators of the facet rows: interior side L, interior side R, boundary."""
+        return self.interior.T_L, self.interior.T_R, self.boundary.T_L
+
+    def set_point_operators(self, traces, gauss):
+        """The corrector's operators from the predictor's points: ``traces`` (CSR) to the rows of
+        `_face_traces` and ``gauss`` (n_gauss, n_points) to the Gauss points, folded into the volume
+        term K_alpha = D_alpha^T gauss (F is linear in Q)."""
+        self.traces = tuple((T.indptr, T.indices, T.data) for T in traces)
+        f, b = self.interior, self.boundary
+        self.face_material = tuple(self.cell_material[c] for c in (f.cell_L, f.cell_R, b.cell_L))
+        self.face_rho = tuple(self.rho_cell[c] for c in (f.cell_L, f.cell_R, b.cell_L))
+        self.laws = law_table(self.materials.materials)          # the compiled point laws
+        self.K = tuple((D.T @ gauss).tocsr() for D in self.D)
 
     # ---------------------------------------------------------------- predictor
-    def _divergence(self, Q, D=None):
-        """sum_alpha D_alpha F_alpha(Q) at the points; Q (..., nel, nq, nc), D (d, nel, nq, nq)
-        C-contiguous."""
-        D = self.D_points if D is None else D
-        Q4 = np.ascontiguousarray(Q).reshape((-1,) + Q.shape[-3:])
-        out = np.empty_like(Q4)
-        _divergence_cells(Q4, D, out)
-        return out.reshape(Q.shape)
-
     def _law(self, U, points=None):
         """Q from U at (..., n_points, nc) values at ``points`` (default: the Gauss points)."""
         points = points or self.gauss
@@ -192,51 +229,73 @@ class ADERDGFEM(DGFEM):
         ``law`` on (..., nel, n, nc) arrays, the predictor's derivative matrices D and those of the
         Taylor guess D_taylor (d, nel, n, n), and the source (P+1, nel, n, nc) or None.
         Returns (u_hat, q_hat), (P+1, nel, n, nc)."""
-        u_hat = np.broadcast_to(U[None], (len(self.tau),) + U.shape)
-        if self.picard_guess == "taylor":                                       # L23 eq 64
-            u_hat = u_hat - dt * self.tau[:, None, None, None] * self._divergence(law(U), D_taylor)[None]
-            if source is not None:          # S at tau_s rather than t_n: only the guess, O(dt^2) apart
-                u_hat = u_hat + dt * self.tau[:, None, None, None] * source
-        U0 = U[None] if source is None else U[None] + dt * np.tensordot(self.T_tau, source, axes=1)
-        d = self.d                                  # change measured per block (F, p)
-        scale = np.ones(U.shape[-1])
+        U = np.ascontiguousarray(U)
+        d, n_t = self.d, len(self.tau)
+        scale = np.ones(U.shape[-1])                # change measured per block (F, p)
         scale[: d * d] = np.abs(U[..., : d * d]).max() or 1.0
         scale[d * d:] = np.abs(U[..., d * d:]).max() or 1.0
-        shape = u_hat.shape
-        flat = lambda a: a.reshape(len(a), -1, shape[-1])                       # noqa: E731 (views)
-        U0, u_hat = flat(np.ascontiguousarray(U0)), np.ascontiguousarray(u_hat)
+        u_hat, new = np.empty((2, n_t) + U.shape)   # two buffers, swapped every iteration
+        div = np.empty((n_t,) + U.shape)
+        flat = lambda a: a.reshape(len(a), -1)      # noqa: E731 (views: (S, n_points nc))
+        if self.picard_guess == "taylor":           # L23 eq 64: u_hat[s] = U - dt tau_s DIV F(Q(U))
+            _divergence_cells(law(U)[None], D_taylor, div[:1])
+            _picard_update(flat(U[None]), (dt * self.tau)[:, None], flat(div[:1]), 1.0, scale, flat(U[None]),
+                           flat(u_hat))
+            if source is not None:          # S at tau_s rather than t_n: only the guess, O(dt^2) apart
+                u_hat += dt * self.tau[:, None, None, None] * source
+        else:
+            u_hat[...] = U
+        U0 = U[None] if source is None else U[None] + dt * np.tensordot(self.T_tau, source, axes=1)
+        U0 = flat(np.ascontiguousarray(U0))
         for it in range(1, self.picard_max + 1):
-            div = self._divergence(law(u_hat), D)
-            new = np.empty(shape)
+            _divergence_cells(law(u_hat), D, div)
             change = _picard_update(U0, self.T_tau, flat(div), dt, scale, flat(u_hat), flat(new))
-            u_hat = new
+            u_hat, new = new, u_hat
             if change <= self.picard_tol:
                 break
         self.picard.add(it, change <= self.picard_tol)
         return u_hat, law(u_hat)
 
     # ---------------------------------------------------------------- corrector
-    def _coefficients(self, values):
-        """Per-cell point values (nel, nq, nc) -> DG coefficients (n_dofs, nc)."""
-        out = np.empty((self.n_dofs, values.shape[-1]))
-        out[self.cell_dofs] = np.matmul(self.B_inv, values)
-        return out
-
     def corrector(self, dofs, u_hat, q_hat, time, dt, source=None):
-        """u^{n+1} = u^n + dt sum_s w_s M^-1 (R(q_hat(tau_s)) + int Phi S(tau_s)); returns it and
-        the boundary work. ``source``: (P+1, n_gauss, nc) at the Gauss points, or None."""
-        R_total = np.zeros_like(dofs)
-        work = 0.0
-        nc = dofs.shape[1]
+        """u^{n+1} = u^n + dt M^-1 sum_s w_s (R(q_hat(tau_s)) + int Phi S(tau_s)) (L23 eq 28-33);
+        returns it and the boundary work. u_hat, q_hat: (P+1, ..., nc) at the predictor's points;
+        ``source``: (P+1, n_gauss, nc) at the Gauss points, or None. The volume and source terms
+        and the surface integral are linear in Q, so the time nodes are summed before them; the
+        face states (tangent, Riemann problem) are taken at every node."""
+        n_t, nc = len(self.tau), dofs.shape[1]
+        u_hat, q_hat = u_hat.reshape(n_t, -1, nc), q_hat.reshape(n_t, -1, nc)
+        R = system.volume_flux(_time_sum(self.w_tau, q_hat), self.K, np.zeros_like(dofs))
+        R_faces, work = self.surface_integral(u_hat, q_hat, time, dt)
+        R += R_faces
+        if source is not None:
+            R += self.source_integral(_time_sum(self.w_tau, source))
+        return self.limit(dofs + dt * self.apply_mass_inverse(R)), work
+
+    def surface_integral(self, u_hat, q_hat, time, dt):
+        """-int Phi sum_s w_s F_N*(tau_s) over all faces, and the boundary work: one compiled pass
+        over the interior faces for every time node (`ader_kernels`), then the boundary
+        conditions per node (they may depend on time)."""
+        d, n_t, nc = self.d, len(self.tau), u_hat.shape[-1]
+        f, b = self.interior, self.boundary
+        T_L, T_R, T_B = self.traces
+        flux = np.empty((len(f), nc))
+        bad = interior_flux_sum(T_L, T_R, u_hat, q_hat, self.face_rho[0], self.face_rho[1], f.normal,
+                                self.face_material[0], self.face_material[1], *self.laws, self.w_tau, flux)
+        if bad >= 0:
+            _not_hyperbolic(bad)
+        R = f.integrate(flux, "R") - f.integrate(flux, "L")
+        if not len(b):
+            return R, 0.0
+        F, Q = np.empty((n_t, len(b), d * d)), np.empty((n_t, len(b), nc))
+        traces(T_B, u_hat, q_hat, F, Q)
+        flux, work = 0.0, 0.0
         for s, (tau, w) in enumerate(zip(self.tau, self.w_tau)):
-            Q_points = q_hat[s].reshape(-1, nc)
-            grid_state = GridState(self._coefficients(u_hat[s]), self._coefficients(q_hat[s]))
-            R, power = self.surface_residual(grid_state, time + tau * dt, dt)
-            R_total += w * (R + self.volume_flux_points(Q_points))
-            if source is not None:
-                R_total += w * self.source_integral(source[s])
+            C = self.materials.tangent(F[s].reshape(-1, d, d), self.face_material[2])
+            states, power = self.boundary_states(Q[s], C, self.face_rho[2], time + tau * dt)
+            flux = flux + w * states.flux
             work += w * dt * power
-        return self.limit(dofs + dt * self.apply_mass_inverse(R_total)), work
+        return R - b.integrate(flux, "L"), work
 
     def advance(self, U, time, dt):
         S = self.space_time_source(self.gauss, time, dt)       # predictor and corrector share it

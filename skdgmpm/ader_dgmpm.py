@@ -24,7 +24,7 @@ from .ader import ADERDGFEM
 from .errors import InputError
 from .mls import shape_functions
 from .quadrature import cell_slots, interpolation_matrix, particle_basis
-from .scheme import GodunovScheme, GridState, cell_values
+from .scheme import GodunovScheme, cell_values
 
 BACKMAPS = ("pic", "flip")
 
@@ -76,33 +76,29 @@ class ADERDGMPM(ADERDGFEM):
         _, grad = mls(xi, cells)                                                # Taylor guess
         self.grad_at_particles = np.ascontiguousarray(np.moveaxis(grad, -1, 0))  # (d, nel, nm, nm)
         self.E_gauss = self._sparse(self.chi_gauss, np.arange(nel * nq).reshape(nel, nq))
-        # facet points: each side evaluates its own cell's MLS reconstruction
-        self._face_ops = {}
-        for faces in (self.interior, self.boundary):
-            for side, cell in (("L", faces.cell_L), ("R", faces.cell_R)):
-                if side == "R" and faces.T_R is None:
-                    continue
-                self._face_ops[id(faces), side] = self._facet_operator(faces.X, cell, mls, nel)
+        # facet rows: each side evaluates its own cell's MLS reconstruction
+        self.set_point_operators([self._facet_operator(X, cell, mls, nel) for X, cell in (
+            (self.interior.X, self.interior.cell_L), (self.interior.X, self.interior.cell_R),
+            (self.boundary.X, self.boundary.cell_L))], self.E_gauss)
         basis_p, slot_p = particle_basis(self.grid, p, self.basis.elem)
         self.S = interpolation_matrix(basis_p, slot_p)                          # DG basis at particles
         self.cell_material = cell_values("materials", p.cell, p.material, nel)
 
     def _sparse(self, values, rows):
-        """(n_rows, n_particles) from per-cell values (nel, n, n_max) on padded slots."""
+        """(n_rows, n_slots) from per-cell values (nel, n, n_max) on the padded particle slots (the
+        predictor's points; padding columns are left out)."""
         nel, n, nm = values.shape
-        col_of_slot = -np.ones(nel * nm, dtype=np.int64)
-        col_of_slot[self.slot] = np.arange(len(self.slot))
-        cols = col_of_slot.reshape(nel, 1, nm).repeat(n, axis=1)
+        cols = np.broadcast_to(np.arange(nel * nm).reshape(nel, 1, nm), values.shape)
         r = np.broadcast_to(rows[:, :, None], values.shape)
-        keep = cols >= 0
+        keep = np.broadcast_to(self.mask.reshape(nel, 1, nm) > 0, values.shape)
         return sp.csr_matrix((values[keep], (r[keep], cols[keep])),
-                             shape=(int(rows.max()) + 1 if rows.size else 0, len(self.slot)))
+                             shape=(int(rows.max()) + 1 if rows.size else 0, nel * nm))
 
     def _facet_operator(self, X, cell, mls, nel):
         """MLS evaluation at facet rows: parent coordinates of each row in its cell."""
         n = len(X)
         if n == 0:
-            return sp.csr_matrix((0, len(self.slot)))
+            return sp.csr_matrix((0, len(self.mask)))
         ref = self.basis.mapping.invF(X.T[:, :, None], tind=cell)[:, :, 0].T    # (n, d)
         counts = np.bincount(cell, minlength=nel)
         width = max(int(counts.max()), 1)
@@ -115,16 +111,8 @@ class ADERDGMPM(ADERDGFEM):
         rows = rows.reshape(nel, width)
         phi = np.where((rows >= 0)[:, :, None], phi, 0.0)
         op = self._sparse(phi, np.maximum(rows, 0))
-        op.resize((n, len(self.slot)))
+        op.resize((n, len(self.mask)))
         return op.tocsr()
-
-    def face_operator(self, faces, side):
-        return self._face_ops[id(faces), side]
-
-    def face_values(self, T, grid_state, cells):
-        d = self.d
-        U, Q = T @ grid_state.U, T @ grid_state.Q
-        return Q, U[:, : d * d].reshape(-1, d, d), self.rho_cell[cells]
 
     # ---------------------------------------------------------------- predictor at particles
     def _padded(self, values):
@@ -132,14 +120,12 @@ class ADERDGMPM(ADERDGFEM):
         out[self.slot] = values
         return out.reshape((self.basis.dx.shape[0], self.n_max) + values.shape[1:])
 
-    def predictor(self, U_particles, dt, source=None):
-        """Space-time predictor with dofs at the particles: (u_hat, q_hat) (P+1, n_particles, nc);
-        ``source`` (P+1, n_particles, nc) from `space_time_source` at the particles, or None."""
+    def predictor(self, U_slots, dt, source=None):
+        """Space-time predictor with dofs at the particles: (u_hat, q_hat) (P+1, nel, n_max, nc) on
+        the padded slots from U on them (nel, n_max, nc); ``source`` (P+1, n_particles, nc) from
+        `space_time_source` at the particles, or None."""
         S = None if source is None else np.stack([self._padded(s) for s in source])   # P+1 time nodes
-        u_hat, q_hat = self._picard(self._padded(U_particles), dt, self._law_cells, self.D_particles,
-                                    self.grad_at_particles, S)
-        unpad = lambda a: a.reshape(len(self.tau), -1, a.shape[-1]).take(self.slot, axis=1)   # C order
-        return unpad(u_hat), unpad(q_hat)
+        return self._picard(U_slots, dt, self._law_cells, self.D_particles, self.grad_at_particles, S)
 
     def _law_cells(self, U):
         """The law at the particles on padded (..., nel, n_max, nc) arrays (padding stays zero):
@@ -152,22 +138,12 @@ class ADERDGMPM(ADERDGFEM):
         return Q.reshape(U.shape)
 
     # ---------------------------------------------------------------- corrector and back-map
-    def corrector(self, dofs, u_hat, q_hat, time, dt, source=None):
-        R_total = np.zeros_like(dofs)
-        work = 0.0
-        for s, (tau, w) in enumerate(zip(self.tau, self.w_tau)):
-            R, power = self.surface_residual(GridState(u_hat[s], q_hat[s]), time + tau * dt, dt)
-            R_total += w * (R + self.volume_flux_points(self.E_gauss @ q_hat[s]))
-            if source is not None:
-                R_total += w * self.source_integral(source[s])
-            work += w * dt * power
-        return self.limit(dofs + dt * self.apply_mass_inverse(R_total)), work
-
     def step(self, state, dt_max=np.inf):
-        dofs_n = self.project(self.E_gauss @ state.U)                 # grid image of the MLS field
+        U_slots = self._padded(state.U)
+        dofs_n = self.project(self.E_gauss @ U_slots.reshape(-1, U_slots.shape[-1]))  # grid image of the MLS field
 
         def attempt(dt):
-            u_hat, q_hat = self.predictor(state.U, dt, self.space_time_source(self.particles, state.t, dt))
+            u_hat, q_hat = self.predictor(U_slots, dt, self.space_time_source(self.particles, state.t, dt))
             dofs, work = self.corrector(dofs_n, u_hat, q_hat, state.t, dt,
                                         self.space_time_source(self.gauss, state.t, dt))
             if self.backmap == "pic":

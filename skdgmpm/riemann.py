@@ -158,6 +158,30 @@ def _transverse_positive(w, m, C, n0, n1, rho, scale, out):
     return True
 
 
+@njit(cache=True, inline="always")
+def _godunov_flux2(Q_L, C_L, rho_L, Q_R, C_R, rho_R, n0, n1):
+    """(ok, t*_0, t*_1, v*_0, v*_1) of one 2D face from the sides' Q (6,), tangents and densities,
+    in scalars (no scratch arrays, so the whole face stays in registers): both impedances by
+    `_sqrt_spd2`, the 2 x 2 system (Z_L + Z_R) v* = t_R - t_L + Z_L v_L + Z_R v_R by Cramer's rule."""
+    tL0, tL1 = Q_L[0] * n0 + Q_L[1] * n1, Q_L[2] * n0 + Q_L[3] * n1
+    tR0, tR1 = Q_R[0] * n0 + Q_R[1] * n1, Q_R[2] * n0 + Q_R[3] * n1
+    okL, a00, a01, a10, a11, _, _, _, _ = _sqrt_spd2(
+        rho_L * _acoustic2(C_L, 0, 0, n0, n1), rho_L * _acoustic2(C_L, 0, 1, n0, n1),
+        rho_L * _acoustic2(C_L, 1, 0, n0, n1), rho_L * _acoustic2(C_L, 1, 1, n0, n1))
+    okR, b00, b01, b10, b11, _, _, _, _ = _sqrt_spd2(
+        rho_R * _acoustic2(C_R, 0, 0, n0, n1), rho_R * _acoustic2(C_R, 0, 1, n0, n1),
+        rho_R * _acoustic2(C_R, 1, 0, n0, n1), rho_R * _acoustic2(C_R, 1, 1, n0, n1))
+    vL0, vL1, vR0, vR1 = Q_L[4], Q_L[5], Q_R[4], Q_R[5]
+    A00, A01, A10, A11 = a00 + b00, a01 + b01, a10 + b10, a11 + b11
+    c0 = tR0 - tL0 + (a00 * vL0 + a01 * vL1) + (b00 * vR0 + b01 * vR1)
+    c1 = tR1 - tL1 + (a10 * vL0 + a11 * vL1) + (b10 * vR0 + b11 * vR1)
+    det = A00 * A11 - A01 * A10
+    vs0, vs1 = (A11 * c0 - A01 * c1) / det, (A00 * c1 - A10 * c0) / det
+    ts0 = tL0 + (a00 * (vs0 - vL0) + a01 * (vs1 - vL1))
+    ts1 = tL1 + (a10 * (vs0 - vL0) + a11 * (vs1 - vL1))
+    return okL and okR, ts0, ts1, vs0, vs1
+
+
 # ---------------------------------------------------------------- loops over faces
 # The loops take d as an argument and are inlined into a kernel that calls them with the literal
 # 2 in 2D: the compiler then unrolls every (d, d) loop.

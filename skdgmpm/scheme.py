@@ -122,7 +122,12 @@ class GodunovScheme:
     def boundary_flux(self, grid_state, time):
         """(d) ghost states -> boundary stationary states and fluxes; returns states and power."""
         b = self.boundary
-        Q_L, C, rho = self._side(b, "L", grid_state, b.cell_L)
+        return self.boundary_states(*self._side(b, "L", grid_state, b.cell_L), time)
+
+    def boundary_states(self, Q_L, C, rho, time):
+        """Boundary stationary states and fluxes from the inner traces Q_L (nf, ncomp), tangents C
+        and densities on the boundary faces; returns states and power."""
+        b = self.boundary
         P, v_L = system.split(Q_L, self.d)
         t_L = np.einsum("fia,fa->fi", P, b.normal)
         Z = impedance(C, b.normal, rho)
