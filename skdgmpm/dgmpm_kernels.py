@@ -60,13 +60,14 @@ def _edge_split(w, m, n0, n1, rho, scale, Z, out):
     as `riemann.transverse_positive` with m = C : w_F and Z = (sqrt(rho A_n), its inverse) given
     (Z is shared by the two opposite edges of a cell, A_n being quadratic in n)."""
     z00, z01, z10, z11, i00, i01, i10, i11 = Z
+    inv_rho = 1.0 / rho                                  # one division (they dominate the cost)
     g0 = 0.0 + m[0] * n0 + m[1] * n1                     # g = (C : w_F) n
     g1 = 0.0 + m[2] * n0 + m[3] * n1
-    a0 = 0.5 * ((i00 * g0 + i01 * g1) - w[4] / rho)
-    a1 = 0.5 * ((i10 * g0 + i11 * g1) - w[5] / rho)
+    a0 = 0.5 * ((i00 * g0 + i01 * g1) - w[4] * inv_rho)
+    a1 = 0.5 * ((i10 * g0 + i11 * g1) - w[5] * inv_rho)
     out[0], out[1], out[2], out[3] = scale * (a0 * n0), scale * (a0 * n1), scale * (a1 * n0), scale * (a1 * n1)
-    out[4] = scale * (-0.5 * g0 + 0.5 * (z00 * w[4] + z01 * w[5]) / rho)
-    out[5] = scale * (-0.5 * g1 + 0.5 * (z10 * w[4] + z11 * w[5]) / rho)
+    out[4] = scale * (-0.5 * g0 + 0.5 * (z00 * w[4] + z01 * w[5]) * inv_rho)
+    out[5] = scale * (-0.5 * g1 + 0.5 * (z10 * w[4] + z11 * w[5]) * inv_rho)
 
 
 @njit(cache=True, inline="always")
