@@ -20,7 +20,7 @@ import numpy as np
 from skdgmpm.materials.points import law_table
 
 from . import system
-from .dgmpm_kernels import boundary_pass, boundary_sides, integrate_faces, interior_pass
+from .dgmpm_kernels import boundary_pass, boundary_sides, integrate_faces, integrate_interior, interior_pass
 from .errors import InputError
 from .faces import interior_faces
 from .quadrature import ParticleMap, VolumeOperators, interpolation_matrix, particle_basis
@@ -53,6 +53,7 @@ class DGMPM(GodunovScheme):
     stages: tuple = ("project", "time_step", "volume_flux", "boundary_flux", "interface_flux",
                      "transverse_flux", "source", "advance", "back_map", "constitutive_update")
     external_work: float = field(default=0.0, init=False)
+    _kept: tuple = field(default=None, init=False, repr=False)   # (projected state, its fixed_terms)
 
     def __post_init__(self):
         if self.integrator not in ("euler", "rk2"):
@@ -117,27 +118,32 @@ class DGMPM(GodunovScheme):
     # ---------------------------------------------------------------- stages
     def project(self, state):
         """(a) M_i U_i = sum_p S_ip V_p U_p; Q likewise (v from the projected momentum)."""
-        return GridState(*self.map.project_state(state.U, state.Q, self.d))
+        grid_state = GridState(*self.map.project_state(state.U, state.Q, self.d))
+        self._kept = (grid_state, None)           # its Delta t-free terms, once computed
+        return grid_state
 
     def volume_flux(self, grid_state, out=None):
         """(c) sum_alpha K^alpha F_alpha(Q) (added to ``out`` if given)."""
         return system.volume_flux(grid_state.Q, self.ops.stiffness, out)
 
-    def interface_flux(self, grid_state, dt, flux, corr_bnd):
-        """(e) Godunov fluxes at interior faces from the linearised Riemann solver, added to flux
-        (nf, nc), with (CTU) the transverse corrections of both sides' fluctuations (into flux and
-        corr_bnd): one compiled pass."""
-        f = self.interior
+    def interface_flux(self, grid_state):
+        """(e) Godunov fluxes at interior faces from the linearised Riemann solver with (CTU) the
+        transverse corrections of both sides' fluctuations, in one compiled pass. Returns the
+        fluxes (nf, nc) and the corrections per unit Delta t of the interior and boundary faces'
+        fluxes, (nf, nc) and (nb, nc)."""
+        f, nc = self.interior, grid_state.U.shape[1]
+        flux, corr, corr_bnd = np.empty((len(f), nc)), np.zeros((len(f), nc)), np.zeros((len(self.boundary), nc))
         bad = interior_pass(self.traces["L"], self.traces["R"], grid_state.U, grid_state.Q, self.map.rho,
                             f.normal, f.cell_L, f.cell_R, self.cell_material, *self.laws,
-                            dt, self.ctu is not None, self.topology["L"], self.topology["R"], flux, corr_bnd)
+                            self.ctu is not None, self.topology["L"], self.topology["R"], flux, corr, corr_bnd)
         if bad >= 0:
             _not_hyperbolic(bad)
+        return flux, corr, corr_bnd
 
-    def boundary_flux(self, grid_state, time, dt, flux_int, corr_bnd):
+    def boundary_flux(self, grid_state, time, dt, R, corr_bnd):
         """(d) ghost states -> boundary stationary states (t*, v*) and fluxes (nb, nc), with (CTU)
-        the transverse corrections of the fluctuations entering the boundary cells; returns the
-        fluxes and the stationary states."""
+        the transverse corrections of the fluctuations entering the boundary cells (into R at
+        interior edges, into corr_bnd at boundary edges); returns the fluxes and (t*, v*)."""
         b, d = self.boundary, self.d
         nb = len(b)
         t_L, v_L, Z, rho = np.empty((nb, d)), np.empty((nb, d)), np.empty((nb, d, d)), np.empty(nb)
@@ -151,7 +157,7 @@ class DGMPM(GodunovScheme):
             t_s[sel], v_s[sel] = bc.star(time, t_L[sel], v_L[sel], Z[sel], b.normal[sel])
         flux = np.zeros((nb, system.n_components(d)))
         bad = boundary_pass(b.normal, t_L, v_L, t_s, v_s, C, rho, dt, self.ctu is not None, self.topology["boundary"],
-                            flux, flux_int, corr_bnd)
+                            self.traces["L"], self.traces["R"], self.interior.measure, flux, R, corr_bnd)
         if bad >= 0:
             _not_hyperbolic(bad)
         return flux, t_s, v_s
@@ -162,8 +168,8 @@ class DGMPM(GodunovScheme):
         on the characteristic basis of the cell's two edges adjacent to the source face; the part
         moving out through an edge becomes the extra flux G = -dt / (2 h) B+ A dU there, h the cell
         size across the source face; at a boundary edge the ghost cell is a copy of the cell and
-        sends back the cell's own correction through the opposite edge. The face passes integrate
-        the interior edges' corrections and collect the boundary edges' in ``corr_bnd``.)"""
+        sends back the cell's own correction through the opposite edge. The face passes compute
+        them with the fluxes.)"""
         frame, free_v, free_t = self.ctu
         F, p = system.split(corr_bnd, self.d)
         dv = np.einsum("fkj,fja,fa->fk", frame, F, self.boundary.normal) * free_v
@@ -171,12 +177,24 @@ class DGMPM(GodunovScheme):
         return system.join(np.einsum("fkj,fk->fj", frame, dv)[:, :, None] * self.boundary.normal[:, None, :],
                            np.einsum("fkj,fk->fj", frame, dt_))
 
-    def surface_residual(self, grid_state, time, dt):
-        """-int Phi F_N* over all faces; also returns the power through the boundary (W)."""
+    def fixed_terms(self, grid_state):
+        """The volume term and `interface_flux` of a grid state: they depend on Delta t only
+        through the factor of the CTU corrections, so the CFL guard's repeated attempts on the
+        projected state reuse them."""
+        if self._kept is not None and self._kept[0] is grid_state:
+            if self._kept[1] is None:
+                self._kept = (grid_state, (self.volume_flux(grid_state), *self.interface_flux(grid_state)))
+            return self._kept[1]
+        return (self.volume_flux(grid_state), *self.interface_flux(grid_state))
+
+    def surface_residual(self, grid_state, time, dt, out=None, interior=None):
+        """-int Phi F_N* over all faces (added to ``out`` if given; ``interior``: the result of
+        `interface_flux` if known); also returns the power through the boundary (W)."""
         b, nc = self.boundary, grid_state.U.shape[1]
-        flux_int, corr_bnd = np.zeros((len(self.interior), nc)), np.zeros((len(b), nc))
-        self.interface_flux(grid_state, dt, flux_int, corr_bnd)
-        flux, t_s, v_s = self.boundary_flux(grid_state, time, dt, flux_int, corr_bnd)
+        flux_int, corr, corr_bnd = self.interface_flux(grid_state) if interior is None else interior
+        R = np.zeros((self.n_dofs, nc)) if out is None else out
+        corr_bnd = dt * corr_bnd
+        flux, t_s, v_s = self.boundary_flux(grid_state, time, dt, R, corr_bnd)
         if self.ctu is None:
             power = float(np.sum(b.measure * np.einsum("fi,fi->f", t_s, v_s)))
         else:                                               # work of the corrected boundary flux
@@ -184,16 +202,14 @@ class DGMPM(GodunovScheme):
             F, p = system.split(flux, self.d)
             v = -np.einsum("fia,fa->fi", F, b.normal)
             power = float(np.sum(b.measure * np.einsum("fi,fi->f", -p, v)))
-        R = np.zeros((self.n_dofs, nc))
-        integrate_faces(self.traces["L"], self.interior.measure, -1.0, flux_int, R)
-        integrate_faces(self.traces["R"], self.interior.measure, 1.0, flux_int, R)
+        integrate_interior(self.traces["L"], self.traces["R"], self.interior.measure, flux_int, corr, dt, R)
         integrate_faces(self.traces["boundary"], b.measure, -1.0, flux, R)
         return R, power
 
     def residual(self, grid_state, time, dt):
         """M dU/dt = K^alpha F_alpha - int Phi F_N* + int Phi S; also returns the boundary power (W)."""
-        R, power = self.surface_residual(grid_state, time, dt)
-        self.volume_flux(grid_state, out=R)
+        volume, *interior = self.fixed_terms(grid_state)
+        R, power = self.surface_residual(grid_state, time, dt, volume.copy(), interior)
         if self.body_force is not None:          # int Phi rho0 b, the particles as quadrature
             R += self.map.S.T @ (self.particles.volume[:, None] * self.source(self.particles, time))
         return R, power

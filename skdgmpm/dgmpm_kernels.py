@@ -4,8 +4,11 @@ For every face the pass gathers the side states through the trace operators (CSR
 in scipy's order), evaluates each side's tangent with the law's point function
 (`skdgmpm.materials.points`), solves the linearised Riemann problem (`skdgmpm.riemann` point
 functions) and, for CTU, splits each fluctuation on the characteristic basis of the two edges of
-the cell it enters as soon as it is known, adding those corrections to the edges' fluxes. Only
-the face fluxes (nf, nc) are stored; `integrate_faces` then adds -int Phi F* to the residual.
+the cell it enters as soon as it is known, adding those corrections to the edges' fluxes. The
+corrections are proportional to Delta t (G = -dt / (2 h) B+ A dU): the interior pass stores them
+per unit Delta t, so that a repeated attempt of the CFL guard reuses the whole pass; the boundary
+pass (its stationary states depend on time) is redone, and `integrate_interior` adds
+-int Phi (F* + dt G) to the residual.
 
 Face-set arrays as in `skdgmpm.faces` ((nf, d) normals, (nf,) measures); a trace is the triple
 (indptr, indices, data) of its CSR matrix; a CTU topology of one face side is
@@ -71,14 +74,10 @@ def _edge_split(w, m, n0, n1, rho, scale, Z, out):
 
 
 @njit(cache=True, inline="always")
-def _split(w, C, rho, dt, topo, f, G, flux_int, corr_bnd):
-    """CTU [R18 eq 34-37] of the fluctuation w (6,) entering a cell through face f: G_e =
-    -dt / (2 h) B+_n w for the cell's two edges e adjacent to the face; an interior edge j gets
-    sign G_e added to its flux flux_int[j], a boundary edge j gets G_e - G_(1-e) into corr_bnd[j]
-    (its ghost cell, a copy of the cell, sends back the opposite edge's part). False where the
-    acoustic tensor along an edge is not positive definite."""
-    h, normals, edge_int, edge_bnd, sign = topo
-    scale = -dt / (2.0 * h[f])
+def _split(w, C, rho, scale, normals, f, G):
+    """CTU [R18 eq 34-37] of the fluctuation w (6,) entering a cell through face f: G[e] =
+    scale B+_n w for the cell's two edges e adjacent to the face (normals (2, nf, 2)). False where
+    the acoustic tensor along an edge is not positive definite."""
     m = _stress_rate(w, C)              # C : w_F, shared by the two edges
     Z = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     for e in range(2):
@@ -91,11 +90,22 @@ def _split(w, C, rho, dt, topo, f, G, flux_int, corr_bnd):
                 return False
             Z = (z00, z01, z10, z11, i00, i01, i10, i11)
         _edge_split(w, m, n0, n1, rho, scale, Z, G[e])
+    return True
+
+
+@njit(cache=True, inline="always")
+def _split_interior(w, C, rho, topo, f, G, corr, corr_bnd):
+    """`_split` per unit Delta t (scale -1 / (2 h)): an interior edge j gets sign G_e added to
+    corr[j], a boundary edge j gets G_e - G_(1-e) into corr_bnd[j] (its ghost cell, a copy of the
+    cell, sends back the opposite edge's part)."""
+    h, normals, edge_int, edge_bnd, sign = topo
+    if not _split(w, C, rho, -1.0 / (2.0 * h[f]), normals, f, G):
+        return False
     for e in range(2):
         j = edge_int[e, f]
         if j >= 0:
             for k in range(6):
-                flux_int[j, k] += sign[e, f] * G[e, k]
+                corr[j, k] += sign[e, f] * G[e, k]
         j = edge_bnd[e, f]
         if j >= 0:
             for k in range(6):
@@ -115,20 +125,21 @@ def _face_flux(t_s, v_s, N, flux, d):
 # ---------------------------------------------------------------- interior faces
 @njit(cache=True)
 def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
-                  dt, ctu, topo_L, topo_R, flux, corr_bnd):
-    """Godunov flux of every interior face added to flux (nf, nc) (zero on entry) with, for
-    ``ctu``, the transverse corrections of both sides' fluctuations (into flux and corr_bnd).
-    Returns the first face whose acoustic tensor is not positive definite, or -1."""
+                  ctu, topo_L, topo_R, flux, corr, corr_bnd):
+    """Godunov flux of every interior face into flux (nf, nc) and, for ``ctu``, the transverse
+    corrections per unit Delta t of both sides' fluctuations added to corr (nf, nc) and corr_bnd
+    (nb, nc) (zero on entry). Returns the first face whose acoustic tensor is not positive
+    definite, or -1."""
     if N.shape[1] == 2:                 # a literal d: the (d, d) loops unrolled
         return _interior_d(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
-                           dt, ctu, topo_L, topo_R, flux, corr_bnd, 2)
+                           ctu, topo_L, topo_R, flux, corr, corr_bnd, 2)
     return _interior_d(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
-                       dt, ctu, topo_L, topo_R, flux, corr_bnd, N.shape[1])
+                       ctu, topo_L, topo_R, flux, corr, corr_bnd, N.shape[1])
 
 
 @njit(cache=True, inline="always")
 def _interior_d(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
-                dt, ctu, topo_L, topo_R, flux, corr_bnd, d):
+                ctu, topo_L, topo_R, flux, corr, corr_bnd, d):
     dd, nc = d * d, d * d + d
     q_L, q_R, w_L, w_R = np.empty(nc), np.empty(nc), np.empty(nc), np.empty(nc)
     F_L, F_R = np.empty((3, 3)), np.empty((3, 3))
@@ -156,6 +167,8 @@ def _interior_d(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, par
         if not _sqrt_spd(M, Z_R, Zi, d):
             return f
         _godunov(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s, A, b, d)
+        for k in range(nc):
+            flux[f, k] = 0.0
         _face_flux(t_s, v_s, N[f], flux[f], d)
         if ctu:                                          # fluctuations A- dQ into L, A+ dQ into R
             for i in range(d):
@@ -165,9 +178,9 @@ def _interior_d(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, par
                     w_R[k] = -(v_R[i] * N[f, a]) + v_s[i] * N[f, a]
                 w_L[dd + i] = -t_s[i] + t_L[i]
                 w_R[dd + i] = -t_R[i] + t_s[i]
-            if not _split(w_L, C_L, rho_L, dt, topo_L, f, G, flux, corr_bnd):
+            if not _split_interior(w_L, C_L, rho_L, topo_L, f, G, corr, corr_bnd):
                 return f
-            if not _split(w_R, C_R, rho_R, dt, topo_R, f, G, flux, corr_bnd):
+            if not _split_interior(w_R, C_R, rho_R, topo_R, f, G, corr, corr_bnd):
                 return f
     return -1
 
@@ -204,11 +217,12 @@ def _boundary_sides_d(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v
 
 
 @njit(cache=True)
-def boundary_pass(N, t_L, v_L, t_s, v_s, C, rho_f, dt, ctu, topo, flux, flux_int, corr_bnd):
+def boundary_pass(N, t_L, v_L, t_s, v_s, C, rho_f, dt, ctu, topo, T_L, T_R, measure, flux, R, corr_bnd):
     """Flux F_N(t*, v*) of every boundary face added to flux (nf, nc) (zero on entry) and, with
     ``ctu``, the transverse corrections of the fluctuation F_N(t*, v*) - F_N(t_L, v_L) entering
-    the cell (into the interior fluxes flux_int and corr_bnd). Returns the first face whose
-    acoustic tensor along an edge is not positive definite, or -1."""
+    the cell: an interior edge's integrated at once into R (through the interior traces T_L, T_R
+    and face measures: few faces), a boundary edge's added to corr_bnd. Returns the first face
+    whose acoustic tensor along an edge is not positive definite, or -1."""
     d = N.shape[1]
     dd, nc = d * d, d * d + d
     w, G = np.empty(nc), np.empty((2, nc))
@@ -219,9 +233,31 @@ def boundary_pass(N, t_L, v_L, t_s, v_s, C, rho_f, dt, ctu, topo, flux, flux_int
                 for a in range(d):
                     w[i * d + a] = flux[f, i * d + a] + v_L[f, i] * N[f, a]
                 w[dd + i] = flux[f, dd + i] + t_L[f, i]
-            if not _split(w, C[f], rho_f[f], dt, topo, f, G, flux_int, corr_bnd):
+            h, normals, edge_int, edge_bnd, sign = topo
+            if not _split(w, C[f], rho_f[f], -dt / (2.0 * h[f]), normals, f, G):
                 return f
+            for e in range(2):
+                j = edge_int[e, f]
+                if j >= 0:
+                    _integrate(T_L, j, -sign[e, f] * measure[j], G[e], R)
+                    _integrate(T_R, j, sign[e, f] * measure[j], G[e], R)
+                j = edge_bnd[e, f]
+                if j >= 0:
+                    for k in range(nc):
+                        corr_bnd[j, k] += G[e, k] - G[1 - e, k]
     return -1
+
+
+@njit(cache=True)
+def integrate_interior(T_L, T_R, measure, flux, corr, dt, R):
+    """R += T_R^T (measure F) - T_L^T (measure F) with F = flux + dt corr (nf, nc): the surface
+    integral over the interior faces, in face order."""
+    F = np.empty(flux.shape[1])
+    for f in range(len(measure)):
+        for k in range(len(F)):
+            F[k] = flux[f, k] + dt * corr[f, k]
+        _integrate(T_L, f, -measure[f], F, R)
+        _integrate(T_R, f, measure[f], F, R)
 
 
 @njit(cache=True)
