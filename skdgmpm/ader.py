@@ -217,18 +217,20 @@ class ADERDGFEM(DGFEM):
             return None
         return np.stack([self.source(points, time + tau * dt) for tau in self.tau])
 
-    def predictor(self, U_points, dt, source=None):
+    def predictor(self, U_points, dt, source=None, Q_points=None):
         """Space-time predictor: (u_hat, q_hat) of shape (P+1, nel, nq, nc) and the iterations;
-        ``source`` (P+1, n_points, nc) from `space_time_source` at the Gauss points."""
+        ``source`` (P+1, n_points, nc) from `space_time_source` at the Gauss points; ``Q_points``
+        the law at U_points when known (the state's Q)."""
         nel, nq = self.basis.dx.shape
         S = None if source is None else source.reshape(len(self.tau), nel, nq, -1)
-        return self._picard(U_points.reshape(nel, nq, -1), dt, self._law, self.D_points, self.D_points, S)
+        Q = None if Q_points is None else Q_points.reshape(nel, nq, -1)
+        return self._picard(U_points.reshape(nel, nq, -1), dt, self._law, self.D_points, self.D_points, S, Q)
 
-    def _picard(self, U, dt, law, D, D_taylor, source=None):
+    def _picard(self, U, dt, law, D, D_taylor, source=None, Q=None):
         """Picard iterations of L23 eq 62 on per-cell values U (nel, n, nc) at t_n, with the law
         ``law`` on (..., nel, n, nc) arrays, the predictor's derivative matrices D and those of the
-        Taylor guess D_taylor (d, nel, n, n), and the source (P+1, nel, n, nc) or None.
-        Returns (u_hat, q_hat), (P+1, nel, n, nc)."""
+        Taylor guess D_taylor (d, nel, n, n), the source (P+1, nel, n, nc) or None, and Q = law(U)
+        when the caller knows it. Returns (u_hat, q_hat), (P+1, nel, n, nc)."""
         U = np.ascontiguousarray(U)
         d, n_t = self.d, len(self.tau)
         scale = np.ones(U.shape[-1])                # change measured per block (F, p)
@@ -238,7 +240,8 @@ class ADERDGFEM(DGFEM):
         div = np.empty((n_t,) + U.shape)
         flat = lambda a: a.reshape(len(a), -1)      # noqa: E731 (views: (S, n_points nc))
         if self.picard_guess == "taylor":           # L23 eq 64: u_hat[s] = U - dt tau_s DIV F(Q(U))
-            _divergence_cells(law(U)[None], D_taylor, div[:1])
+            Q = law(U) if Q is None else np.ascontiguousarray(Q)
+            _divergence_cells(Q[None], D_taylor, div[:1])
             _picard_update(flat(U[None]), (dt * self.tau)[:, None], flat(div[:1]), 1.0, scale, flat(U[None]),
                            flat(u_hat))
             if source is not None:          # S at tau_s rather than t_n: only the guess, O(dt^2) apart
@@ -297,7 +300,14 @@ class ADERDGFEM(DGFEM):
             work += w * dt * power
         return R - b.integrate(flux, "L"), work
 
-    def advance(self, U, time, dt):
+    def advance(self, U, time, dt, Q_points=None):
         S = self.space_time_source(self.gauss, time, dt)       # predictor and corrector share it
-        u_hat, q_hat = self.predictor(self.B @ U, dt, S)
+        u_hat, q_hat = self.predictor(self.B @ U, dt, S, Q_points)
         return self.corrector(U, u_hat, q_hat, time, dt, S)
+
+    def step(self, state, dt_max=np.inf):
+        def attempt(dt):            # the state's Q is the law at the Gauss points at t_n
+            dofs, work = self.advance(state.dofs, state.t, dt, state.Q)
+            return self.evaluate_points(state, dofs, dt), work
+
+        return self.step_with_cfl_guard(state, dt_max, attempt)

@@ -86,11 +86,11 @@ class ADERDGMPM(ADERDGFEM):
 
     def _sparse(self, values, rows):
         """(n_rows, n_slots) from per-cell values (nel, n, n_max) on the padded particle slots (the
-        predictor's points; padding columns are left out)."""
+        predictor's points; padding columns and rows < 0 are left out)."""
         nel, n, nm = values.shape
         cols = np.broadcast_to(np.arange(nel * nm).reshape(nel, 1, nm), values.shape)
         r = np.broadcast_to(rows[:, :, None], values.shape)
-        keep = np.broadcast_to(self.mask.reshape(nel, 1, nm) > 0, values.shape)
+        keep = (self.mask.reshape(nel, 1, nm) > 0) & (r >= 0)
         return sp.csr_matrix((values[keep], (r[keep], cols[keep])),
                              shape=(int(rows.max()) + 1 if rows.size else 0, nel * nm))
 
@@ -108,9 +108,7 @@ class ADERDGMPM(ADERDGFEM):
         rows = -np.ones(nel * width, dtype=np.int64)
         rows[row_slot] = np.arange(n)
         phi, _ = mls(pts.reshape(nel, width, self.d), np.arange(nel))
-        rows = rows.reshape(nel, width)
-        phi = np.where((rows >= 0)[:, :, None], phi, 0.0)
-        op = self._sparse(phi, np.maximum(rows, 0))
+        op = self._sparse(phi, rows.reshape(nel, width))          # padding rows (-1) left out
         op.resize((n, len(self.mask)))
         return op.tocsr()
 
@@ -120,12 +118,12 @@ class ADERDGMPM(ADERDGFEM):
         out[self.slot] = values
         return out.reshape((self.basis.dx.shape[0], self.n_max) + values.shape[1:])
 
-    def predictor(self, U_slots, dt, source=None):
+    def predictor(self, U_slots, dt, source=None, Q_slots=None):
         """Space-time predictor with dofs at the particles: (u_hat, q_hat) (P+1, nel, n_max, nc) on
-        the padded slots from U on them (nel, n_max, nc); ``source`` (P+1, n_particles, nc) from
-        `space_time_source` at the particles, or None."""
+        the padded slots from U on them (nel, n_max, nc) (and the law there, Q_slots, if known);
+        ``source`` (P+1, n_particles, nc) from `space_time_source` at the particles, or None."""
         S = None if source is None else np.stack([self._padded(s) for s in source])   # P+1 time nodes
-        return self._picard(U_slots, dt, self._law_cells, self.D_particles, self.grad_at_particles, S)
+        return self._picard(U_slots, dt, self._law_cells, self.D_particles, self.grad_at_particles, S, Q_slots)
 
     def _law_cells(self, U):
         """The law at the particles on padded (..., nel, n_max, nc) arrays (padding stays zero):
@@ -139,11 +137,11 @@ class ADERDGMPM(ADERDGFEM):
 
     # ---------------------------------------------------------------- corrector and back-map
     def step(self, state, dt_max=np.inf):
-        U_slots = self._padded(state.U)
+        U_slots, Q_slots = self._padded(state.U), self._padded(state.Q)       # Q: the law at t_n
         dofs_n = self.project(self.E_gauss @ U_slots.reshape(-1, U_slots.shape[-1]))  # grid image of the MLS field
 
         def attempt(dt):
-            u_hat, q_hat = self.predictor(U_slots, dt, self.space_time_source(self.particles, state.t, dt))
+            u_hat, q_hat = self.predictor(U_slots, dt, self.space_time_source(self.particles, state.t, dt), Q_slots)
             dofs, work = self.corrector(dofs_n, u_hat, q_hat, state.t, dt,
                                         self.space_time_source(self.gauss, state.t, dt))
             if self.backmap == "pic":
