@@ -79,24 +79,24 @@ def _picard_update(U0, T, div, dt, scale, u_hat, new):
     """One Picard update new[s] = U0[s] - dt sum_r T[s, r] div[r] and the change
     max |new - u_hat| / scale (nan if any is nan). Flat arrays: div (R, M), new (S, M), U0 and
     u_hat (S or 1, M) (one row: the same at every node), M = n_points nc; scale (nc,)."""
-    if len(scale) == 6:                 # 2D: a literal state width
-        return _picard_update_nc(U0, T, div, dt, scale, u_hat, new, 6)
-    return _picard_update_nc(U0, T, div, dt, scale, u_hat, new, len(scale))
+    if len(scale) == 6 and len(div) == 2:           # 2D, S1T1 / S2T2: literal sizes, so the sum over
+        return _picard_update_nc(U0, T, div, dt, scale, u_hat, new, 6, 2)    # the nodes unrolls and
+    if len(scale) == 6 and len(div) == 3:           # the loop over the points vectorises
+        return _picard_update_nc(U0, T, div, dt, scale, u_hat, new, 6, 3)
+    return _picard_update_nc(U0, T, div, dt, scale, u_hat, new, len(scale), len(div))
 
 
 @njit(cache=True, inline="always")
-def _picard_update_nc(U0, T, div, dt, scale, u_hat, new, nc):
+def _picard_update_nc(U0, T, div, dt, scale, u_hat, new, nc, n_r):
     n_points = new.shape[1] // nc
     big = np.zeros(nc)                  # max |new - u_hat| per component, nan once one is nan
     for s in range(len(new)):
         out, U0_s, u_s = new[s], U0[s if len(U0) > 1 else 0], u_hat[s if len(u_hat) > 1 else 0]
-        out[:] = 0.0
-        for r in range(len(div)):       # the time nodes outermost: plain loops over the points
-            t, div_r = T[s, r], div[r]  # vectorise (a short inner sum over r does not)
-            for j in range(len(out)):
-                out[j] += t * div_r[j]
         for j in range(len(out)):
-            out[j] = U0_s[j] - dt * out[j]
+            acc = 0.0
+            for r in range(n_r):
+                acc += T[s, r] * div[r, j]
+            out[j] = U0_s[j] - dt * acc
         for p in range(n_points):
             for v in range(nc):
                 x = abs(out[p * nc + v] - u_s[p * nc + v])

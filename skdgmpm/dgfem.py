@@ -35,6 +35,16 @@ def _apply_blocks(blocks, cell_dofs, R, out):
     (nel, nb), R and out (n_dofs, nc) (a compiled loop: numpy's batched matmul on a gathered copy
     cost ~4 ms a call at 128^2)."""
     nb, nc = blocks.shape[1], R.shape[1]
+    if nb == 4 and nc == 6:             # Q1 in 2D: literal sizes, the loops unrolled
+        _apply_blocks_n(blocks, cell_dofs, R, out, 4, 6)
+    elif nb == 9 and nc == 6:           # Q2 in 2D
+        _apply_blocks_n(blocks, cell_dofs, R, out, 9, 6)
+    else:
+        _apply_blocks_n(blocks, cell_dofs, R, out, nb, nc)
+
+
+@njit(cache=True, inline="always")
+def _apply_blocks_n(blocks, cell_dofs, R, out, nb, nc):
     for c in range(len(blocks)):
         for k in range(nb):
             for j in range(nc):
