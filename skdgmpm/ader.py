@@ -180,11 +180,12 @@ class ADERDGFEM(DGFEM):
             self.picard_max = 2 * self.order + 2
         # the corrector's operators from the predictor's points (here the Gauss points) to the
         # facet rows and to the volume term, built once: point values -> coefficients -> traces
-        to_dofs = sp.csr_matrix((self.B_inv.ravel(), (np.repeat(self.cell_dofs, nq, axis=1).ravel(),
-                                                       np.tile(np.arange(nel * nq).reshape(nel, 1, nq),
-                                                               (1, self.nb, 1)).ravel())),
-                                shape=(self.n_dofs, nel * nq))
-        self.set_point_operators([(T @ to_dofs).tocsr() for T in self._face_traces()], sp.identity(nel * nq).tocsr())
+        shape = (nel, self.nb, nq)
+        rows = np.broadcast_to(self.cell_dofs[:, :, None], shape)                    # dof k of cell c
+        cols = np.broadcast_to(np.arange(nel * nq).reshape(nel, 1, nq), shape)        # point q of cell c
+        to_dofs = sp.csr_matrix((self.B_inv.ravel(), (rows.ravel(), cols.ravel())), shape=(self.n_dofs, nel * nq))
+        self.set_point_operators([(T @ to_dofs).tocsr() for T in self._face_traces()],
+                                 sp.identity(nel * nq, format="csr"))
 
     def _face_traces(self):
         """DG trace operators of the facet rows: interior side L, interior side R, boundary."""

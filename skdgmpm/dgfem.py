@@ -184,13 +184,11 @@ class DGFEM(GodunovScheme):
         return system.primitive(self.materials.stress(F, self.cell_material[cells]), p, rho)
 
     def face_values(self, T, grid_state, cells):
-        """Traces of U (and of Q when the state carries it, as the ADER predictor does; otherwise
-        the law is evaluated at the facet points)."""
+        """Traces of U, and Q from the law at the facet points."""
         d = self.d
         U = T @ grid_state.U
         rho = self.rho_cell[cells]          # not a trace: ElementQuadP's basis is no partition of unity
-        Q = self.point_state(U, cells, rho) if grid_state.Q is None else T @ grid_state.Q
-        return Q, U[:, : d * d].reshape(-1, d, d), rho
+        return self.point_state(U, cells, rho), U[:, : d * d].reshape(-1, d, d), rho
 
     # ---------------------------------------------------------------- stages
     def volume_flux(self, U_dofs):
