@@ -12,6 +12,11 @@ One step is the list of named stages of R18 §5 (a)-(h):
 ``transverse_flux`` only filters the boundary faces' corrections; DCU leaves them out. ``source`` adds
 int Phi rho0 b = sum_p S_ip V_p rho0 b(X_p, t) when a body force is set (particle quadrature, at
 the time the boundary values are taken).
+
+The volume term and the interior faces depend on Delta t only through the factor of the CTU
+corrections: they are computed once per projected state (``fixed_terms``), and an attempt that the
+CFL guard repeats with a smaller Delta t reuses them (the boundary pass, which depends on time, and
+everything after it are redone).
 """
 from dataclasses import dataclass, field
 
