@@ -176,6 +176,7 @@ class ADERDGFEM(DGFEM):
         self.D_points = np.ascontiguousarray(np.einsum("aeqb,ebr->aeqr", grad, self.B_inv))  # d/dX_alpha
         self.tau, self.w_tau, self.T_tau = time_matrices(self.order)
         self.nq = nq
+        self._repeated = {}
         if not self.picard_max:
             self.picard_max = 2 * self.order + 2
         # the corrector's operators from the predictor's points (here the Gauss points) to the
@@ -203,13 +204,20 @@ class ADERDGFEM(DGFEM):
         self.K = tuple((D.T @ gauss).tocsr() for D in self.D)
 
     # ---------------------------------------------------------------- predictor
-    def _law(self, U, points=None):
-        """Q from U at (..., n_points, nc) values at ``points`` (default: the Gauss points)."""
-        points = points or self.gauss
-        shape = U.shape
-        flat = U.reshape(-1, shape[-1])
-        n_rep = flat.shape[0] // len(points)
-        return self.point_state(flat, np.tile(points.cell, n_rep), np.tile(points.rho0, n_rep)).reshape(shape)
+    def _law(self, U):
+        """Q from U at (..., n_gauss, nc) values at the Gauss points."""
+        return self._law_at(U, self.gauss.cell, self.gauss.rho0)
+
+    def _law_at(self, U, cells, rho):
+        """The law on (..., n, nc) values at n points of the given cells and densities (n,): one
+        evaluation over every batch entry, with the cells and densities repeated once per entry
+        (cached: the batches are 1 or P+1 time nodes)."""
+        nc = U.shape[-1]
+        n_rep = U.size // (len(cells) * nc)
+        key = (id(cells), n_rep)
+        if key not in self._repeated:
+            self._repeated[key] = np.tile(cells, n_rep), np.tile(rho, n_rep)
+        return self.point_state(U.reshape(-1, nc), *self._repeated[key]).reshape(U.shape)
 
     def space_time_source(self, points, time, dt):
         """Source values at ``points`` and the time nodes t_n + tau_s dt: (P+1, n, nc), or None
@@ -270,16 +278,15 @@ class ADERDGFEM(DGFEM):
         n_t, nc = len(self.tau), dofs.shape[1]
         u_hat, q_hat = u_hat.reshape(n_t, -1, nc), q_hat.reshape(n_t, -1, nc)
         R = system.volume_flux(_time_sum(self.w_tau, q_hat), self.K, np.zeros_like(dofs))
-        R_faces, work = self.surface_integral(u_hat, q_hat, time, dt)
-        R += R_faces
+        work = self.surface_integral(u_hat, q_hat, time, dt, R)
         if source is not None:
             R += self.source_integral(_time_sum(self.w_tau, source))
         return self.limit(dofs + dt * self.apply_mass_inverse(R)), work
 
-    def surface_integral(self, u_hat, q_hat, time, dt):
-        """-int Phi sum_s w_s F_N*(tau_s) over all faces, and the boundary work: one compiled pass
-        over the interior faces for every time node (`ader_kernels`), then the boundary
-        conditions per node (they may depend on time)."""
+    def surface_integral(self, u_hat, q_hat, time, dt, R):
+        """-int Phi sum_s w_s F_N*(tau_s) over all faces added to R; returns the boundary work. One
+        compiled pass over the interior faces for every time node (`ader_kernels`), then the
+        boundary conditions per node (they may depend on time)."""
         d, n_t, nc = self.d, len(self.tau), u_hat.shape[-1]
         f, b = self.interior, self.boundary
         T_L, T_R, T_B = self.traces
@@ -288,9 +295,10 @@ class ADERDGFEM(DGFEM):
                                 self.face_material[0], self.face_material[1], *self.laws, self.w_tau, flux)
         if bad >= 0:
             _not_hyperbolic(bad)
-        R = f.integrate(flux, "R") - f.integrate(flux, "L")
+        f.integrate(flux, "R", R)
+        f.integrate(flux, "L", R, sign=-1.0)
         if not len(b):
-            return R, 0.0
+            return 0.0
         F, Q = np.empty((n_t, len(b), d * d)), np.empty((n_t, len(b), nc))
         traces(T_B, u_hat, q_hat, F, Q)
         flux, work = 0.0, 0.0
@@ -299,7 +307,8 @@ class ADERDGFEM(DGFEM):
             states, power = self.boundary_states(Q[s], C, self.face_rho[2], time + tau * dt)
             flux = flux + w * states.flux
             work += w * dt * power
-        return R - b.integrate(flux, "L"), work
+        b.integrate(flux, "L", R, sign=-1.0)
+        return work
 
     def advance(self, U, time, dt, Q_points=None):
         S = self.space_time_source(self.gauss, time, dt)       # predictor and corrector share it

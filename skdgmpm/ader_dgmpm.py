@@ -129,11 +129,9 @@ class ADERDGMPM(ADERDGFEM):
         """The law at the particles on padded (..., nel, n_max, nc) arrays (padding stays zero):
         one evaluation over every slot of every batch entry (padding slots hold U = 0, an
         admissible input of every law, and are zeroed after), so no gather or scatter."""
-        nc = U.shape[-1]
-        n_rep = U.size // (len(self.mask) * nc)
-        Q = self.point_state(U.reshape(-1, nc), np.tile(self.slot_cell, n_rep), np.tile(self.slot_rho0, n_rep))
-        Q.reshape(n_rep, len(self.mask), nc)[:, self.padding] = 0.0
-        return Q.reshape(U.shape)
+        Q = self._law_at(U, self.slot_cell, self.slot_rho0)
+        Q.reshape(-1, len(self.mask), Q.shape[-1])[:, self.padding] = 0.0
+        return Q
 
     # ---------------------------------------------------------------- corrector and back-map
     def step(self, state, dt_max=np.inf):

@@ -89,11 +89,13 @@ class FaceSet:
     def __len__(self):
         return len(self.facets)
 
-    def integrate(self, flux, side="L"):
-        """``int_Gamma Phi_i F*`` on the given side for face-constant ``flux`` (nf, ncomp)."""
+    def integrate(self, flux, side="L", out=None, sign=1.0):
+        """``sign int_Gamma Phi_i F*`` on the given side for face-constant ``flux`` (nf, ncomp),
+        added to ``out`` (n_dofs, ncomp) if given (no temporaries)."""
         T = self.T_L if side == "L" else self.T_R
-        out = np.zeros((T.shape[1], flux.shape[1]))
-        _integrate(T.indptr, T.indices, T.data, self.measure, flux, out)
+        if out is None:
+            out = np.zeros((T.shape[1], flux.shape[1]))
+        _integrate(T.indptr, T.indices, T.data, sign * self.measure, flux, out)
         return out
 
 

@@ -9,6 +9,7 @@ points).
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from . import system
 from .bcs import FREE
@@ -58,9 +59,19 @@ class FaceStates:
     rho_R: np.ndarray = None
 
 
+@njit(cache=True)
+def _advance_positions(x, v_old, v_new, half_dt, out):
+    for p in range(len(x)):
+        for k in range(x.shape[1]):
+            out[p, k] = x[p, k] + half_dt * (v_old[p, k] + v_new[p, k])
+
+
 def advance_positions(state, v_new, dt, d):
-    """x + dt (v_old + v_new) / 2: current positions of points that move with the material."""
-    return state.x + 0.5 * dt * (state.Q[:, d * d:] + v_new)
+    """x + dt (v_old + v_new) / 2: current positions of points that move with the material (one
+    compiled pass: the velocities are strided views of Q)."""
+    out = np.empty_like(state.x)
+    _advance_positions(state.x, state.Q[:, d * d:], v_new, 0.5 * dt, out)
+    return out
 
 
 def cell_values(name, cells, values, n_cells):
