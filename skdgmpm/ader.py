@@ -111,6 +111,24 @@ def _picard_update_nc(U0, T, div, dt, scale, u_hat, new, nc, n_r):
     return change
 
 
+@njit(cache=True)
+def _block_scale(U, dd):
+    """Per component of the state (n, nc): the largest |U| of its block (F: the first dd
+    components, p: the others), 1 where that is 0, nan if any is nan (one pass, no temporaries)."""
+    big = np.zeros(2)
+    for p in range(len(U)):
+        for c in range(U.shape[1]):
+            x = abs(U[p, c])
+            k = 0 if c < dd else 1
+            if x > big[k] or x != x:
+                big[k] = x
+    scale = np.empty(U.shape[1])
+    for c in range(U.shape[1]):
+        x = big[0] if c < dd else big[1]
+        scale[c] = x if x != 0.0 else 1.0
+    return scale
+
+
 def _time_sum(w, a):
     """sum_s w[s] a[s] over the time nodes (the leading axis)."""
     out = w[0] * a[0]
@@ -242,9 +260,7 @@ class ADERDGFEM(DGFEM):
         when the caller knows it. Returns (u_hat, q_hat), (P+1, nel, n, nc)."""
         U = np.ascontiguousarray(U)
         d, n_t = self.d, len(self.tau)
-        scale = np.ones(U.shape[-1])                # change measured per block (F, p)
-        scale[: d * d] = np.abs(U[..., : d * d]).max() or 1.0
-        scale[d * d:] = np.abs(U[..., d * d:]).max() or 1.0
+        scale = _block_scale(U.reshape(-1, U.shape[-1]), d * d)     # change measured per block (F, p)
         u_hat, new = np.empty((2, n_t) + U.shape)   # two buffers, swapped every iteration
         div = np.empty((n_t,) + U.shape)
         flat = lambda a: a.reshape(len(a), -1)      # noqa: E731 (views: (S, n_points nc))
