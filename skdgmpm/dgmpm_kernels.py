@@ -20,7 +20,7 @@ from numba import njit
 
 from skdgmpm.materials.points import tangent_point
 
-from .riemann import _acoustic, _acoustic2, _godunov, _sqrt_spd, _sqrt_spd2, _stress_rate
+from .riemann import _acoustic, _acoustic2, _godunov, _godunov_flux2, _sqrt_spd, _sqrt_spd2, _stress_rate
 
 
 # ---------------------------------------------------------------- point pieces (one face side)
@@ -49,67 +49,91 @@ def _gather(trace, f, U, Q, rho, q, F, d):
 
 @njit(cache=True, inline="always")
 def _integrate(trace, f, scale, value, R):
-    """R[i] += T[f, i] (scale value) over row f of a trace."""
+    """R[i] += T[f, i] (scale value) over row f of a trace (value an array or a tuple)."""
     indptr, indices, data = trace
     for k in range(indptr[f], indptr[f + 1]):
         n, w = indices[k], data[k]
-        for c in range(value.shape[0]):
+        for c in range(len(value)):
             R[n, c] += w * (scale * value[c])
 
 
 @njit(cache=True, inline="always")
-def _edge_split(w, m, n0, n1, rho, scale, Z, out):
-    """scale B+_n w of one fluctuation w (6,) along the edge normal n = (n0, n1) into out (6,),
-    as `riemann.transverse_positive` with m = C : w_F and Z = (sqrt(rho A_n), its inverse) given
-    (Z is shared by the two opposite edges of a cell, A_n being quadratic in n)."""
+def _edge_split(w, m, n0, n1, inv_rho, scale, Z):
+    """scale B+_n w of one fluctuation w (6,) along the edge normal n = (n0, n1), as
+    `riemann.transverse_positive`, returned as a 6-tuple; m = C : w_F and Z = (sqrt(rho A_n), its
+    inverse) given (Z is shared by the two opposite edges of a cell, A_n being quadratic in n)."""
     z00, z01, z10, z11, i00, i01, i10, i11 = Z
-    inv_rho = 1.0 / rho                                  # one division (they dominate the cost)
     g0 = 0.0 + m[0] * n0 + m[1] * n1                     # g = (C : w_F) n
     g1 = 0.0 + m[2] * n0 + m[3] * n1
     a0 = 0.5 * ((i00 * g0 + i01 * g1) - w[4] * inv_rho)
     a1 = 0.5 * ((i10 * g0 + i11 * g1) - w[5] * inv_rho)
-    out[0], out[1], out[2], out[3] = scale * (a0 * n0), scale * (a0 * n1), scale * (a1 * n0), scale * (a1 * n1)
-    out[4] = scale * (-0.5 * g0 + 0.5 * (z00 * w[4] + z01 * w[5]) * inv_rho)
-    out[5] = scale * (-0.5 * g1 + 0.5 * (z10 * w[4] + z11 * w[5]) * inv_rho)
+    return (scale * (a0 * n0), scale * (a0 * n1), scale * (a1 * n0), scale * (a1 * n1),
+            scale * (-0.5 * g0 + 0.5 * (z00 * w[4] + z01 * w[5]) * inv_rho),
+            scale * (-0.5 * g1 + 0.5 * (z10 * w[4] + z11 * w[5]) * inv_rho))
 
 
 @njit(cache=True, inline="always")
-def _split(w, C, rho, scale, normals, f, G):
-    """CTU [R18 eq 34-37] of the fluctuation w (6,) entering a cell through face f: G[e] =
-    scale B+_n w for the cell's two edges e adjacent to the face (normals (2, nf, 2)). False where
-    the acoustic tensor along an edge is not positive definite."""
+def _impedance2(C, rho, n0, n1):
+    """`riemann._sqrt_spd2` of rho A_n, A_n = C_iajb n_a n_b (2D): (ok, (Z, Z^-1) as an 8-tuple)."""
+    ok, z00, z01, z10, z11, i00, i01, i10, i11 = _sqrt_spd2(
+        rho * _acoustic2(C, 0, 0, n0, n1), rho * _acoustic2(C, 0, 1, n0, n1),
+        rho * _acoustic2(C, 1, 0, n0, n1), rho * _acoustic2(C, 1, 1, n0, n1))
+    return ok, (z00, z01, z10, z11, i00, i01, i10, i11)
+
+
+@njit(cache=True, inline="always")
+def _split(w, C, rho, scale, normals, f):
+    """CTU [R18 eq 34-37] of the fluctuation w (6-tuple) entering a cell through face f:
+    (ok, G_0, G_1), G_e = scale B+_n w for the cell's two edges e adjacent to the face (normals
+    (2, nf, 2)) as 6-tuples (scalars: the whole split stays in registers); ok False where the
+    acoustic tensor along an edge is not positive definite."""
     m = _stress_rate(w, C)              # C : w_F, shared by the two edges
-    Z = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    for e in range(2):
-        n0, n1 = normals[e, f, 0], normals[e, f, 1]
-        if e == 0 or not (n0 == -normals[0, f, 0] and n1 == -normals[0, f, 1]):
-            ok, z00, z01, z10, z11, i00, i01, i10, i11 = _sqrt_spd2(
-                rho * _acoustic2(C, 0, 0, n0, n1), rho * _acoustic2(C, 0, 1, n0, n1),
-                rho * _acoustic2(C, 1, 0, n0, n1), rho * _acoustic2(C, 1, 1, n0, n1))
-            if not ok:
-                return False
-            Z = (z00, z01, z10, z11, i00, i01, i10, i11)
-        _edge_split(w, m, n0, n1, rho, scale, Z, G[e])
-    return True
+    inv_rho = 1.0 / rho                 # one division (they dominate the cost)
+    a0, a1 = normals[0, f, 0], normals[0, f, 1]
+    b0, b1 = normals[1, f, 0], normals[1, f, 1]
+    ok, Z = _impedance2(C, rho, a0, a1)
+    if ok and not (b0 == -a0 and b1 == -a1):
+        ok, Z_b = _impedance2(C, rho, b0, b1)
+    else:
+        Z_b = Z
+    G_0 = _edge_split(w, m, a0, a1, inv_rho, scale, Z)
+    G_1 = _edge_split(w, m, b0, b1, inv_rho, scale, Z_b)
+    return ok, G_0, G_1
 
 
 @njit(cache=True, inline="always")
-def _split_interior(w, C, rho, topo, f, G, corr, corr_bnd):
+def _add_boundary_edges(edge_bnd, f, G_0, G_1, corr_bnd):
+    """A boundary edge j of either of the two edges gets G_e - G_(1-e) into corr_bnd[j] (its ghost
+    cell, a copy of the cell, sends back the opposite edge's part)."""
+    j = edge_bnd[0, f]
+    if j >= 0:
+        for k in range(6):
+            corr_bnd[j, k] += G_0[k] - G_1[k]
+    j = edge_bnd[1, f]
+    if j >= 0:
+        for k in range(6):
+            corr_bnd[j, k] += G_1[k] - G_0[k]
+
+
+@njit(cache=True, inline="always")
+def _split_interior(w, C, rho, topo, f, corr, corr_bnd):
     """`_split` per unit Delta t (scale -1 / (2 h)): an interior edge j gets sign G_e added to
-    corr[j], a boundary edge j gets G_e - G_(1-e) into corr_bnd[j] (its ghost cell, a copy of the
-    cell, sends back the opposite edge's part)."""
+    corr[j], a boundary edge as `_add_boundary_edges`."""
     h, normals, edge_int, edge_bnd, sign = topo
-    if not _split(w, C, rho, -1.0 / (2.0 * h[f]), normals, f, G):
+    ok, G_0, G_1 = _split(w, C, rho, -1.0 / (2.0 * h[f]), normals, f)
+    if not ok:
         return False
-    for e in range(2):
-        j = edge_int[e, f]
-        if j >= 0:
-            for k in range(6):
-                corr[j, k] += sign[e, f] * G[e, k]
-        j = edge_bnd[e, f]
-        if j >= 0:
-            for k in range(6):
-                corr_bnd[j, k] += G[e, k] - G[1 - e, k]
+    j = edge_int[0, f]
+    if j >= 0:
+        s = sign[0, f]
+        for k in range(6):
+            corr[j, k] += s * G_0[k]
+    j = edge_int[1, f]
+    if j >= 0:
+        s = sign[1, f]
+        for k in range(6):
+            corr[j, k] += s * G_1[k]
+    _add_boundary_edges(edge_bnd, f, G_0, G_1, corr_bnd)
     return True
 
 
@@ -126,10 +150,10 @@ def _face_flux(t_s, v_s, N, flux, d):
 @njit(cache=True)
 def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
                   ctu, topo_L, topo_R, flux, corr, corr_bnd):
-    """Godunov flux of every interior face into flux (nf, nc) and, for ``ctu``, the transverse
-    corrections per unit Delta t of both sides' fluctuations added to corr (nf, nc) and corr_bnd
-    (nb, nc) (zero on entry). Returns the first face whose acoustic tensor is not positive
-    definite, or -1."""
+    """Godunov flux of every interior face into flux (nf, nc) and, for ``ctu`` (2D), the
+    transverse corrections per unit Delta t of both sides' fluctuations added to corr (nf, nc)
+    and corr_bnd (nb, nc) (zero on entry). Returns the first face whose acoustic tensor is not
+    positive definite, or -1."""
     if N.shape[1] == 2:                 # a literal d: the (d, d) loops unrolled
         return _interior_d(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
                            ctu, topo_L, topo_R, flux, corr, corr_bnd, 2)
@@ -141,47 +165,52 @@ def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, p
 def _interior_d(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
                 ctu, topo_L, topo_R, flux, corr, corr_bnd, d):
     dd, nc = d * d, d * d + d
-    q_L, q_R, w_L, w_R = np.empty(nc), np.empty(nc), np.empty(nc), np.empty(nc)
+    q_L, q_R = np.empty(nc), np.empty(nc)
     F_L, F_R = np.empty((3, 3)), np.empty((3, 3))
     C_L, C_R = np.empty((d, d, d, d)), np.empty((d, d, d, d))
     M, Z_L, Z_R, Zi, A = np.empty((d, d)), np.empty((d, d)), np.empty((d, d)), np.empty((d, d)), np.empty((d, d))
     b, t_L, t_R, t_s, v_s = np.empty(d), np.empty(d), np.empty(d), np.empty(d), np.empty(d)
-    G = np.empty((2, nc))
     for f in range(len(N)):
         rho_L = _gather(T_L, f, U, Q, rho, q_L, F_L, d)
         rho_R = _gather(T_R, f, U, Q, rho, q_R, F_R, d)
         m_L, m_R = cell_material[cell_L[f]], cell_material[cell_R[f]]
         tangent_point(laws[m_L], params[m_L], F_L, C_L, d)
         tangent_point(laws[m_R], params[m_R], F_R, C_R, d)
+        if d == 2:                      # the face in scalars (registers), its CTU split too
+            n0, n1 = N[f, 0], N[f, 1]
+            ok, ts0, ts1, vs0, vs1 = _godunov_flux2(q_L, C_L, rho_L, q_R, C_R, rho_R, n0, n1)
+            if not ok:
+                return f
+            flux[f, 0], flux[f, 1], flux[f, 2], flux[f, 3] = -(vs0 * n0), -(vs0 * n1), -(vs1 * n0), -(vs1 * n1)
+            flux[f, 4], flux[f, 5] = -ts0, -ts1
+            if ctu:                     # fluctuations A- dQ = F* - F_N(Q_L) into L, A+ dQ into R
+                tL0, tL1 = q_L[0] * n0 + q_L[1] * n1, q_L[2] * n0 + q_L[3] * n1
+                tR0, tR1 = q_R[0] * n0 + q_R[1] * n1, q_R[2] * n0 + q_R[3] * n1
+                w_L = (-(vs0 * n0) + q_L[4] * n0, -(vs0 * n1) + q_L[4] * n1, -(vs1 * n0) + q_L[5] * n0,
+                       -(vs1 * n1) + q_L[5] * n1, -ts0 + tL0, -ts1 + tL1)
+                w_R = (-(q_R[4] * n0) + vs0 * n0, -(q_R[4] * n1) + vs0 * n1, -(q_R[5] * n0) + vs1 * n0,
+                       -(q_R[5] * n1) + vs1 * n1, -tR0 + ts0, -tR1 + ts1)
+                if not _split_interior(w_L, C_L, rho_L, topo_L, f, corr, corr_bnd):
+                    return f
+                if not _split_interior(w_R, C_R, rho_R, topo_R, f, corr, corr_bnd):
+                    return f
+            continue
         for i in range(d):                               # traction t = P N of each side
             sL, sR = 0.0, 0.0
             for a in range(d):
                 sL += q_L[i * d + a] * N[f, a]
                 sR += q_R[i * d + a] * N[f, a]
             t_L[i], t_R[i] = sL, sR
-        v_L, v_R = q_L[dd:], q_R[dd:]
         _acoustic(C_L, N[f], rho_L, M, d)
         if not _sqrt_spd(M, Z_L, Zi, d):
             return f
         _acoustic(C_R, N[f], rho_R, M, d)
         if not _sqrt_spd(M, Z_R, Zi, d):
             return f
-        _godunov(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s, A, b, d)
+        _godunov(t_L, q_L[dd:], t_R, q_R[dd:], Z_L, Z_R, t_s, v_s, A, b, d)
         for k in range(nc):
             flux[f, k] = 0.0
         _face_flux(t_s, v_s, N[f], flux[f], d)
-        if ctu:                                          # fluctuations A- dQ into L, A+ dQ into R
-            for i in range(d):
-                for a in range(d):
-                    k = i * d + a
-                    w_L[k] = -(v_s[i] * N[f, a]) + v_L[i] * N[f, a]
-                    w_R[k] = -(v_R[i] * N[f, a]) + v_s[i] * N[f, a]
-                w_L[dd + i] = -t_s[i] + t_L[i]
-                w_R[dd + i] = -t_R[i] + t_s[i]
-            if not _split_interior(w_L, C_L, rho_L, topo_L, f, G, corr, corr_bnd):
-                return f
-            if not _split_interior(w_R, C_R, rho_R, topo_R, f, G, corr, corr_bnd):
-                return f
     return -1
 
 
@@ -224,27 +253,25 @@ def boundary_pass(N, t_L, v_L, t_s, v_s, C, rho_f, dt, ctu, topo, T_L, T_R, meas
     and face measures: few faces), a boundary edge's added to corr_bnd. Returns the first face
     whose acoustic tensor along an edge is not positive definite, or -1."""
     d = N.shape[1]
-    dd, nc = d * d, d * d + d
-    w, G = np.empty(nc), np.empty((2, nc))
     for f in range(len(N)):
         _face_flux(t_s[f], v_s[f], N[f], flux[f], d)
-        if ctu:
-            for i in range(d):
-                for a in range(d):
-                    w[i * d + a] = flux[f, i * d + a] + v_L[f, i] * N[f, a]
-                w[dd + i] = flux[f, dd + i] + t_L[f, i]
+        if ctu:                         # 2D: w = F_N(t*, v*) - F_N(t_L, v_L)
+            n0, n1 = N[f, 0], N[f, 1]
+            w = (flux[f, 0] + v_L[f, 0] * n0, flux[f, 1] + v_L[f, 0] * n1, flux[f, 2] + v_L[f, 1] * n0,
+                 flux[f, 3] + v_L[f, 1] * n1, flux[f, 4] + t_L[f, 0], flux[f, 5] + t_L[f, 1])
             h, normals, edge_int, edge_bnd, sign = topo
-            if not _split(w, C[f], rho_f[f], -dt / (2.0 * h[f]), normals, f, G):
+            ok, G_0, G_1 = _split(w, C[f], rho_f[f], -dt / (2.0 * h[f]), normals, f)
+            if not ok:
                 return f
-            for e in range(2):
-                j = edge_int[e, f]
-                if j >= 0:
-                    _integrate(T_L, j, -sign[e, f] * measure[j], G[e], R)
-                    _integrate(T_R, j, sign[e, f] * measure[j], G[e], R)
-                j = edge_bnd[e, f]
-                if j >= 0:
-                    for k in range(nc):
-                        corr_bnd[j, k] += G[e, k] - G[1 - e, k]
+            j = edge_int[0, f]
+            if j >= 0:
+                _integrate(T_L, j, -sign[0, f] * measure[j], G_0, R)
+                _integrate(T_R, j, sign[0, f] * measure[j], G_0, R)
+            j = edge_int[1, f]
+            if j >= 0:
+                _integrate(T_L, j, -sign[1, f] * measure[j], G_1, R)
+                _integrate(T_R, j, sign[1, f] * measure[j], G_1, R)
+            _add_boundary_edges(edge_bnd, f, G_0, G_1, corr_bnd)
     return -1
 
 
