@@ -225,11 +225,15 @@ class DGMPM(GodunovScheme):
         # Euler takes boundary values at mid-step (the step's mean for a ramp; a release at
         # t_u = n dt is not missed through round-off in t); Heun at its stage times
         R, power = self.residual(grid_state, time + (0.5 * dt if self.integrator == "euler" else 0.0), dt)
-        U1 = grid_state.U + dt * inv_M * R
+        R *= dt * inv_M                 # in place: U1 = U + dt M^-1 R without state-sized temporaries
+        U1 = np.add(R, grid_state.U, out=R)
         if self.integrator == "euler":
             return U1, dt * power
         R2, power2 = self.residual(self.nodal_state(U1), time + dt, dt)
-        return 0.5 * (grid_state.U + U1 + dt * inv_M * R2), 0.5 * dt * (power + power2)
+        R2 *= dt * inv_M                # 0.5 (U + U1 + dt M^-1 R2), in place likewise
+        R2 += np.add(U1, grid_state.U, out=U1)
+        R2 *= 0.5
+        return R2, 0.5 * dt * (power + power2)
 
     def nodal_state(self, U):
         """Q at the nodes from U at the nodes (the law evaluated at nodes, RK2 second stage)."""
