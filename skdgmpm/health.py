@@ -12,7 +12,7 @@ import numpy as np
 from numba import njit
 
 from skdgmpm.materials.points import law_table, tangent_point
-from .riemann import _acoustic
+from .riemann import _acoustic, _acoustic2
 
 
 def directions(d):
@@ -108,14 +108,16 @@ def _assess_d(U, Q, material, laws, params, rho, N, n_axes, finite, J, lowest, s
         tangent_point(laws[m], params[m], F, C, d)
         lo, hi = np.inf, -np.inf
         for k in range(N.shape[0]):
-            _acoustic(C, N[k], 1.0, A, d)
             if d == 1:
-                small = large = A[0, 0]
-            elif d == 2:
-                mean = 0.5 * (A[0, 0] + A[1, 1])
-                r = np.hypot(0.5 * (A[0, 0] - A[1, 1]), 0.5 * (A[0, 1] + A[1, 0]))
+                small = large = C[0, 0, 0, 0] * (N[k, 0] * N[k, 0])
+            elif d == 2:                # in scalars: no (d, d) scratch round trip
+                n0, n1 = N[k, 0], N[k, 1]
+                a00, a11 = _acoustic2(C, 0, 0, n0, n1), _acoustic2(C, 1, 1, n0, n1)
+                mean = 0.5 * (a00 + a11)
+                r = np.hypot(0.5 * (a00 - a11), 0.5 * (_acoustic2(C, 0, 1, n0, n1) + _acoustic2(C, 1, 0, n0, n1)))
                 small, large = mean - r, mean + r
             else:
+                _acoustic(C, N[k], 1.0, A, d)
                 omega = np.linalg.eigvalsh(0.5 * (A + A.T))
                 small, large = omega[0], omega[-1]
             lo = min(lo, small)
