@@ -11,6 +11,19 @@ _I = np.eye(3)
 
 
 @njit(cache=True, inline="always")
+def stress_point(F, prm, P, d):
+    """d-block P (d, d) of `LinearElastic.first_piola` at one embedded F (3, 3); prm = (mu, lam)."""
+    mu, lam = prm[0], prm[1]
+    tr = 0.0
+    for k in range(3):
+        tr += F[k, k] - 1.0
+    for i in range(d):
+        for a in range(d):
+            eps = 0.5 * ((F[i, a] - (i == a)) + (F[a, i] - (i == a)))
+            P[i, a] = lam * tr * (1.0 if i == a else 0.0) + 2.0 * mu * eps
+
+
+@njit(cache=True, inline="always")
 def tangent_point(F, prm, C, d):
     """C_iajb = lam delta_ia delta_jb + mu (delta_ij delta_ab + delta_ib delta_aj), the same at
     every F: the d-block into C (d, d, d, d); prm = (mu, lam)."""

@@ -8,17 +8,25 @@ from numba import njit
 from .base import Material, _inverse_transpose, admissible_inverse, cofactor
 
 
+@njit(cache=True, inline="always")
+def stress_point(F, prm, P, d):
+    """d-block P (d, d) of P = mu (F - G) + lam ln(J) G, G = F^-T, at one embedded F (3, 3) (the
+    values at F = I where J <= 0); prm = (mu, lam)."""
+    mu, lam = prm[0], prm[1]
+    ok, J, G = _inverse_transpose(F)
+    lam_lnJ = lam * np.log(J)
+    for i in range(d):
+        for a in range(d):
+            f = F[i, a] if ok else (1.0 if i == a else 0.0)
+            P[i, a] = mu * (f - G[3 * i + a]) + lam_lnJ * G[3 * i + a]
+
+
 @njit(cache=True)
 def _first_piola(F, mu, lam, P):
-    """P = mu (F - G) + lam ln(J) G, G = F^-T, at every point: F (n, 3, 3) into P (n, 3, 3)
-    (one compiled loop with the kinematics: the numpy chain cost ~10 passes over the points)."""
+    """P at every point: F (n, 3, 3) into P (n, 3, 3) (one compiled loop with the kinematics: the
+    numpy chain cost ~10 passes over the points)."""
     for p in range(len(F)):
-        ok, J, G = _inverse_transpose(F[p])
-        lam_lnJ = lam * np.log(J)
-        for i in range(3):
-            for a in range(3):
-                f = F[p, i, a] if ok else (1.0 if i == a else 0.0)
-                P[p, i, a] = mu * (f - G[3 * i + a]) + lam_lnJ * G[3 * i + a]
+        stress_point(F[p], (mu, lam), P[p], 3)
 
 
 @njit(cache=True, inline="always")

@@ -1,4 +1,4 @@
-"""Compiled point laws: one material's tangent at one point, chosen by the law's ``law_id``.
+"""Compiled point laws: one material's stress or tangent at one point, chosen by the law's ``law_id``.
 
 Kernels that loop over points or faces themselves (the DGMPM face and particle passes, the health
 check) evaluate the law inside their loop through `tangent_point`; a set of materials is handed
@@ -24,6 +24,20 @@ def tangent_point(law, prm, F, C, d):
         saint_venant_kirchhoff.tangent_point(F, prm, C, d)
     else:
         gavrilyuk.tangent_point(F, prm, C, d)
+
+
+@njit(cache=True, inline="always")
+def stress_point(law, prm, F, P, d):
+    """d-block P (d, d) of the first Piola stress of law ``law`` with parameters ``prm`` at one
+    embedded F (3, 3)."""
+    if law == 0:
+        neo_hookean.stress_point(F, prm, P, d)
+    elif law == 1:
+        linear_elastic.stress_point(F, prm, P, d)
+    elif law == 2:
+        saint_venant_kirchhoff.stress_point(F, prm, P, d)
+    else:
+        gavrilyuk.stress_point(F, prm, P, d)
 
 
 def law_table(materials):

@@ -11,6 +11,28 @@ _I = np.eye(3)
 
 
 @njit(cache=True, inline="always")
+def stress_point(F, prm, P, d):
+    """d-block P (d, d) of P = F S, S = lam tr(E) I + 2 mu E, at one embedded F (3, 3); prm =
+    (mu, lam). F is block diagonal, so P's d-block only needs S's d-block (tr E is the 3D one)."""
+    mu, lam = prm[0], prm[1]
+    E = np.empty((3, 3))
+    trE = 0.0
+    for a in range(3):
+        for b in range(3):
+            s = 0.0
+            for k in range(3):
+                s += F[k, a] * F[k, b]
+            E[a, b] = 0.5 * (s - (1.0 if a == b else 0.0))
+        trE += E[a, a]
+    for i in range(d):
+        for a in range(d):
+            s = 0.0
+            for k in range(d):
+                s += F[i, k] * (lam * trE * (1.0 if k == a else 0.0) + 2.0 * mu * E[k, a])
+            P[i, a] = s
+
+
+@njit(cache=True, inline="always")
 def tangent_point(F, prm, C, d):
     """C_iajb = delta_ij S_ab + lam F_ia F_jb + mu (delta_ab B_ij + F_ib F_ja), S the second
     Piola stress, B = F F^T, of one embedded F (3, 3) into the d-block C (d, d, d, d);

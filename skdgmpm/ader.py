@@ -228,14 +228,14 @@ class ADERDGFEM(DGFEM):
 
     def _law_at(self, U, cells, rho):
         """The law on (..., n, nc) values at n points of the given cells and densities (n,): one
-        evaluation over every batch entry, with the cells and densities repeated once per entry
-        (cached: the batches are 1 or P+1 time nodes)."""
+        evaluation over every batch entry, with the cells' materials and the densities repeated
+        once per entry (cached: the batches are 1 or P+1 time nodes)."""
         nc = U.shape[-1]
         n_rep = U.size // (len(cells) * nc)
         key = (id(cells), n_rep)
         if key not in self._repeated:
-            self._repeated[key] = np.tile(cells, n_rep), np.tile(rho, n_rep)
-        return self.point_state(U.reshape(-1, nc), *self._repeated[key]).reshape(U.shape)
+            self._repeated[key] = np.tile(self.cell_material[cells], n_rep), np.tile(rho, n_rep)
+        return self.materials.state(U.reshape(-1, nc), *self._repeated[key]).reshape(U.shape)
 
     def space_time_source(self, points, time, dt):
         """Source values at ``points`` and the time nodes t_n + tau_s dt: (P+1, n, nc), or None

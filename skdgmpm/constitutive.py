@@ -1,9 +1,38 @@
 """Material laws evaluated on d-dimensional states, one law per particle (or node) group."""
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
+from numba import njit
+
+from skdgmpm.materials.points import law_table, stress_point
 
 from .system import embed
+
+
+@njit(cache=True)
+def _states(laws, params, index, U, rho, Q):
+    d = 2 if U.shape[1] == 6 else (1 if U.shape[1] == 2 else 3)
+    if d == 2:                          # a literal d: the loops unrolled
+        _states_d(laws, params, index, U, rho, Q, 2)
+    else:
+        _states_d(laws, params, index, U, rho, Q, d)
+
+
+@njit(cache=True, inline="always")
+def _states_d(laws, params, index, U, rho, Q, d):
+    dd = d * d
+    F, P = np.empty((3, 3)), np.empty((d, d))
+    for k in range(len(U)):
+        for i in range(3):
+            for a in range(3):
+                F[i, a] = U[k, i * d + a] if i < d and a < d else (1.0 if i == a else 0.0)
+        m = index[k]
+        stress_point(laws[m], params[m], F, P, d)
+        for i in range(d):
+            for a in range(d):
+                Q[k, i * d + a] = P[i, a]
+            Q[k, dd + i] = U[k, dd + i] / rho[k]
 
 
 @dataclass(frozen=True)
@@ -22,6 +51,18 @@ class MaterialSet:
             if sel.any():
                 out[sel] = getattr(mat, method)(F3[sel], *args)[(slice(None),) + (slice(0, d),) * len(shape)]
         return out
+
+    @cached_property
+    def laws(self):
+        """The compiled point laws' table (`skdgmpm.materials.points.law_table`)."""
+        return law_table(self.materials)
+
+    def state(self, U, index, rho):
+        """Q = [P(F), p / rho0] from states U = [F, p] (n, d*d + d) and densities rho (n,): one
+        compiled pass over the points (no embedded copies, masks or per-law batches)."""
+        Q = np.empty(U.shape)
+        _states(*self.laws, np.asarray(index, dtype=np.int64), U, np.asarray(rho, dtype=float), Q)
+        return Q
 
     def stress(self, F, index):
         """First Piola-Kirchhoff P(F): (n, d, d) -> (n, d, d)."""

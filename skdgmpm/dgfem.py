@@ -179,9 +179,7 @@ class DGFEM(GodunovScheme):
 
     def point_state(self, U, cells, rho):
         """Q from U pointwise: P = P(F) with each cell's law, v = p / rho0."""
-        d = self.d
-        F, p = system.split(U, d)
-        return system.primitive(self.materials.stress(F, self.cell_material[cells]), p, rho)
+        return self.materials.state(U, self.cell_material[cells], rho)
 
     def face_values(self, T, grid_state, cells):
         """Traces of U, and Q from the law at the facet points."""

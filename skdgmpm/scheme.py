@@ -188,8 +188,7 @@ class GodunovScheme:
         """(h) P_p = P(F_p), v_p = p_p / rho0_p [R18 eq 41-42]; positions by the trapezoidal rule
         (second order, so displacement errors measure the scheme, not the position update)."""
         d = self.d
-        F, p = system.split(U, d)
-        Q = system.primitive(self.materials.stress(F, self.particles.material), p, self.particles.rho0)
+        Q = self.materials.state(U, self.particles.material, self.particles.rho0)
         new = ParticleState(state.t + dt, U, Q, advance_positions(state, Q[:, d * d:], dt, d), state.step + 1)
         self.check(new)
         return new

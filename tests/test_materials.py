@@ -231,3 +231,23 @@ def test_tangent_block_is_the_block_of_the_3d_tangent(law, d):
     F3[:, :d, :d] = F[:, :d, :d]
     F3 = F3[np.linalg.det(F3) > 0.1]
     assert np.allclose(mat.tangent_block(F3, d), mat.tangent(F3)[:, :d, :d, :d, :d], rtol=1e-13, atol=1e-13)
+
+
+@pytest.mark.parametrize("d", [1, 2, 3])
+def test_compiled_state_is_the_block_of_first_piola(d):
+    # MaterialSet.state (the compiled point stresses, several materials in one pass) against each
+    # law's batched first_piola, inverted points (J <= 0) included
+    from skdgmpm.constitutive import MaterialSet
+    from skdgmpm.system import embed
+    materials = [law(**PARAMS) for law in ALL]
+    F = random_F(0.3, n=24, seed=7)[:, :d, :d].copy()
+    F[0] = np.diag([-1.0, 1.0, 1.0][:d])             # det F < 0
+    index = np.arange(len(F)) % len(materials)
+    rho = 1.0 + np.arange(len(F))
+    p = np.random.default_rng(3).standard_normal((len(F), d))
+    Q = MaterialSet(tuple(materials)).state(np.hstack([F.reshape(-1, d * d), p]), index, rho)
+    for k, mat in enumerate(materials):
+        sel = index == k
+        P = mat.first_piola(embed(F[sel]))[:, :d, :d]
+        assert np.allclose(Q[sel, : d * d], P.reshape(-1, d * d), rtol=1e-13, atol=1e-13)
+    assert np.array_equal(Q[:, d * d:], p / rho[:, None])
