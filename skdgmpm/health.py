@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from skdgmpm.materials.points import law_table, tangent_point
+from skdgmpm.materials.points import tangent_point
 from .riemann import _acoustic, _acoustic2
 
 
@@ -131,7 +131,7 @@ def assess(materials, points, U, Q):
     """`Health` of the state (U, Q) at ``points`` (with ``material``) for a `MaterialSet`."""
     n, nc = U.shape
     d = int(round((-1 + np.sqrt(1 + 4 * nc)) / 2))                      # nc = d * d + d
-    laws, params = law_table(materials.materials)
+    laws, params = materials.laws                                        # built once per set
     rho = np.array([m.rho for m in materials.materials])
     finite, J, lowest, speed = np.empty(n, dtype=np.bool_), np.empty(n), np.empty(n), np.empty(n)
     _assess(U, Q, np.asarray(points.material, dtype=np.int64), laws, params, rho, directions(d), d,
