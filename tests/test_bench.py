@@ -15,7 +15,7 @@ def test_bench_command_prints_table_and_writes_json(tmp_path, capsys):
     assert data["machine"]["cpus"] >= 1 and len(data["rows"]) == 2
     row = data["rows"][0]
     assert row["cells"] == 64 and row["dofs"] == 4 * 64 and row["step_s"] > 0 and row["peak_MiB"] > 0
-    assert row["cpu_us_per_cell_step"] > 0
+    assert row["cpu_us_per_cell_step"] > 0 and row["startup_s"] > 0
 
 
 def test_unknown_benchmark_is_a_clear_error():
