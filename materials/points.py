@@ -10,19 +10,25 @@ from numba import njit
 from . import gavrilyuk, linear_elastic, neo_hookean, saint_venant_kirchhoff
 
 N_PARAMETERS = 4        # the widest law_parameters
+# each law's id (its class attribute ``law_id``), constants of the compiled dispatch below
+NEO_HOOKEAN = neo_hookean.NeoHookean.law_id
+LINEAR_ELASTIC = linear_elastic.LinearElastic.law_id
+SAINT_VENANT_KIRCHHOFF = saint_venant_kirchhoff.SaintVenantKirchhoff.law_id
+GAVRILYUK = gavrilyuk.Gavrilyuk.law_id
+KNOWN = (NEO_HOOKEAN, LINEAR_ELASTIC, SAINT_VENANT_KIRCHHOFF, GAVRILYUK)
 
 
 @njit(cache=True, inline="always")
 def tangent_point(law, prm, F, C, d):
     """d-block C (d, d, d, d) of the tangent of law ``law`` with parameters ``prm`` at one
     embedded F (3, 3)."""
-    if law == 0:
+    if law == NEO_HOOKEAN:
         neo_hookean.tangent_point(F, prm, C, d)
-    elif law == 1:
+    elif law == LINEAR_ELASTIC:
         linear_elastic.tangent_point(F, prm, C, d)
-    elif law == 2:
+    elif law == SAINT_VENANT_KIRCHHOFF:
         saint_venant_kirchhoff.tangent_point(F, prm, C, d)
-    else:
+    else:                               # GAVRILYUK (law_table admits no other id)
         gavrilyuk.tangent_point(F, prm, C, d)
 
 
@@ -30,18 +36,22 @@ def tangent_point(law, prm, F, C, d):
 def stress_point(law, prm, F, P, d):
     """d-block P (d, d) of the first Piola stress of law ``law`` with parameters ``prm`` at one
     embedded F (3, 3)."""
-    if law == 0:
+    if law == NEO_HOOKEAN:
         neo_hookean.stress_point(F, prm, P, d)
-    elif law == 1:
+    elif law == LINEAR_ELASTIC:
         linear_elastic.stress_point(F, prm, P, d)
-    elif law == 2:
+    elif law == SAINT_VENANT_KIRCHHOFF:
         saint_venant_kirchhoff.stress_point(F, prm, P, d)
-    else:
+    else:                               # GAVRILYUK (law_table admits no other id)
         gavrilyuk.stress_point(F, prm, P, d)
 
 
 def law_table(materials):
     """(law ids (n_mat,), parameters (n_mat, N_PARAMETERS)) of a sequence of materials."""
+    for m in materials:             # a new law must be added to the dispatch, never fall into another's
+        if getattr(m, "law_id", None) not in KNOWN:
+            raise TypeError(f"{type(m).__name__}: no compiled point law (law_id {getattr(m, 'law_id', None)!r} "
+                            f"is not one of {KNOWN}; add it to materials/points.py)")
     laws = np.array([m.law_id for m in materials], dtype=np.int64)
     params = np.zeros((len(materials), N_PARAMETERS))
     for k, m in enumerate(materials):

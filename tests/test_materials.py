@@ -251,3 +251,18 @@ def test_compiled_state_is_the_block_of_first_piola(d):
         P = mat.first_piola(embed(F[sel]))[:, :d, :d]
         assert np.allclose(Q[sel, : d * d], P.reshape(-1, d * d), rtol=1e-13, atol=1e-13)
     assert np.array_equal(Q[:, d * d:], p / rho[:, None])
+
+
+def test_a_law_without_a_compiled_point_law_is_refused():
+    """A new law must join the compiled dispatch (materials/points.py), never run as another law."""
+    from dataclasses import dataclass
+
+    from skdgmpm.materials.neo_hookean import NeoHookean
+    from skdgmpm.materials.points import law_table
+
+    @dataclass(frozen=True, kw_only=True)
+    class Unregistered(NeoHookean):
+        law_id = 99
+
+    with pytest.raises(TypeError, match="Unregistered: no compiled point law"):
+        law_table([Unregistered(E=1e9, nu=0.3, rho=1000.0)])
