@@ -385,7 +385,9 @@ def transverse_positive(w_F, w_p, C, n, rho0):
 
 
 def transverse_fluxes(w, C, rho0, scale, normals, edge_int, edge_bnd, sign, corr_int, corr_bnd):
-    """Accumulate the transverse (CTU) flux corrections of one face side in place.
+    """Accumulate the transverse (CTU) flux corrections of one face side in place: the
+    face-set-at-a-time reference that tests/test_dgmpm_kernels.py checks the fused DGMPM face pass
+    (`skdgmpm.dgmpm_kernels`, which splits each fluctuation as soon as it is known) against.
 
     For every face f, the fluctuation w[f] (nc,) entering a cell is split along the normals
     ``normals[e, f]`` (2, nf, d) of the cell's two edges e adjacent to the face, G_e =
