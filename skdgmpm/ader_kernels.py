@@ -15,27 +15,8 @@ from numba import njit
 
 from skdgmpm.materials.points import tangent_point
 
+from .faces import gather_row as _gather
 from .riemann import _acoustic, _godunov, _godunov_flux2, _sqrt_spd
-
-
-@njit(cache=True, inline="always")
-def _gather(trace, f, u, q, q_f, F, d):
-    """Row f of a trace applied to q (into q_f (nc,)) and to u's F part (into the embedded
-    F (3, 3)), each row's products summed in CSR order."""
-    indptr, indices, data = trace
-    nc = q_f.shape[0]
-    for c in range(nc):
-        q_f[c] = 0.0
-    for i in range(3):
-        for a in range(3):
-            F[i, a] = 0.0 if i < d and a < d else (1.0 if i == a else 0.0)
-    for k in range(indptr[f], indptr[f + 1]):
-        n, w = indices[k], data[k]
-        for c in range(nc):
-            q_f[c] += w * q[n, c]
-        for i in range(d):
-            for a in range(d):
-                F[i, a] += w * u[n, i * d + a]
 
 
 @njit(cache=True)

@@ -20,30 +20,20 @@ from numba import njit
 
 from skdgmpm.materials.points import tangent_point
 
+from .faces import gather_row
 from .riemann import _acoustic, _acoustic2, _godunov, _godunov_flux2, _sqrt_spd, _sqrt_spd2, _stress_rate
 
 
 # ---------------------------------------------------------------- point pieces (one face side)
 @njit(cache=True, inline="always")
 def _gather(trace, f, U, Q, rho, q, F, d):
-    """Row f of a trace applied to Q (into q (nc,)), to U's F part (into the embedded F (3, 3))
-    and to rho (returned), each row's products summed in CSR order as scipy's product does."""
+    """`faces.gather_row` (Q into q, U's F part into the embedded F) and the row applied to rho
+    (returned), summed in CSR order."""
+    gather_row(trace, f, U, Q, q, F, d)
     indptr, indices, data = trace
-    nc = q.shape[0]
-    for c in range(nc):
-        q[c] = 0.0
-    for i in range(3):
-        for a in range(3):
-            F[i, a] = 0.0 if i < d and a < d else (1.0 if i == a else 0.0)
     r = 0.0
     for k in range(indptr[f], indptr[f + 1]):
-        n, w = indices[k], data[k]
-        for c in range(nc):
-            q[c] += w * Q[n, c]
-        for i in range(d):
-            for a in range(d):
-                F[i, a] += w * U[n, i * d + a]
-        r += w * rho[n]
+        r += data[k] * rho[indices[k]]
     return r
 
 
