@@ -16,7 +16,7 @@ from numba import njit
 from skdgmpm.materials.points import tangent_point
 
 from .faces import gather_row as _gather
-from .riemann import _acoustic, _godunov, _godunov_flux2, _sqrt_spd
+from .riemann import _godunov_flux2, _godunov_sides
 
 
 @njit(cache=True)
@@ -51,20 +51,9 @@ def _interior_d(T_L, T_R, u_hat, q_hat, rho_L, rho_R, N, mat_L, mat_R, laws, par
                                                                     N[f, 0], N[f, 1])
                 if not ok:
                     return f
-            else:
-                for i in range(d):                       # traction t = P N of each side
-                    sL, sR = 0.0, 0.0
-                    for a in range(d):
-                        sL += q_L[i * d + a] * N[f, a]
-                        sR += q_R[i * d + a] * N[f, a]
-                    t_L[i], t_R[i] = sL, sR
-                _acoustic(C_L, N[f], rho_L[f], M, d)
-                if not _sqrt_spd(M, Z_L, Zi, d):
-                    return f
-                _acoustic(C_R, N[f], rho_R[f], M, d)
-                if not _sqrt_spd(M, Z_R, Zi, d):
-                    return f
-                _godunov(t_L, q_L[dd:], t_R, q_R[dd:], Z_L, Z_R, t_s, v_s, A, b, d)
+            elif not _godunov_sides(q_L, C_L, rho_L[f], q_R, C_R, rho_R[f], N[f], t_L, t_R, M, Z_L, Z_R, Zi, A, b,
+                                    t_s, v_s, d):
+                return f
             w = weights[s]
             for i in range(d):                           # F_N = -[v* (x) N ; t*]
                 for a in range(d):

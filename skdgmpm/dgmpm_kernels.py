@@ -21,7 +21,7 @@ from numba import njit
 from skdgmpm.materials.points import tangent_point
 
 from .faces import gather_row
-from .riemann import _acoustic, _acoustic2, _godunov, _godunov_flux2, _sqrt_spd, _sqrt_spd2, _stress_rate
+from .riemann import _acoustic, _acoustic2, _godunov_flux2, _godunov_sides, _sqrt_spd, _sqrt_spd2, _stress_rate
 
 
 # ---------------------------------------------------------------- point pieces (one face side)
@@ -154,7 +154,7 @@ def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, p
 @njit(cache=True, inline="always")
 def _interior_d(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
                 ctu, topo_L, topo_R, flux, corr, corr_bnd, d):
-    dd, nc = d * d, d * d + d
+    nc = d * d + d
     q_L, q_R = np.empty(nc), np.empty(nc)
     F_L, F_R = np.empty((3, 3)), np.empty((3, 3))
     C_L, C_R = np.empty((d, d, d, d)), np.empty((d, d, d, d))
@@ -185,19 +185,8 @@ def _interior_d(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, par
                 if not _split_interior(w_R, C_R, rho_R, topo_R, f, corr, corr_bnd):
                     return f
             continue
-        for i in range(d):                               # traction t = P N of each side
-            sL, sR = 0.0, 0.0
-            for a in range(d):
-                sL += q_L[i * d + a] * N[f, a]
-                sR += q_R[i * d + a] * N[f, a]
-            t_L[i], t_R[i] = sL, sR
-        _acoustic(C_L, N[f], rho_L, M, d)
-        if not _sqrt_spd(M, Z_L, Zi, d):
+        if not _godunov_sides(q_L, C_L, rho_L, q_R, C_R, rho_R, N[f], t_L, t_R, M, Z_L, Z_R, Zi, A, b, t_s, v_s, d):
             return f
-        _acoustic(C_R, N[f], rho_R, M, d)
-        if not _sqrt_spd(M, Z_R, Zi, d):
-            return f
-        _godunov(t_L, q_L[dd:], t_R, q_R[dd:], Z_L, Z_R, t_s, v_s, A, b, d)
         for k in range(nc):
             flux[f, k] = 0.0
         _face_flux(t_s, v_s, N[f], flux[f], d)

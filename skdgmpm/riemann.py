@@ -128,6 +128,28 @@ def _godunov(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s, A, b, d):
 
 
 @njit(cache=True, inline="always")
+def _godunov_sides(q_L, C_L, rho_L, q_R, C_R, rho_R, n, t_L, t_R, M, Z_L, Z_R, Zi, A, b, t_s, v_s, d):
+    """(t*, v*) of one face into t_s, v_s from both sides' Q = [P, v] (nc,), tangents (d, d, d, d)
+    and densities, any d: tractions t = P n into t_L, t_R, both impedances, `_godunov`; the rest
+    are the caller's scratch arrays. False where an acoustic tensor is not positive definite."""
+    for i in range(d):
+        sL, sR = 0.0, 0.0
+        for a in range(d):
+            sL += q_L[i * d + a] * n[a]
+            sR += q_R[i * d + a] * n[a]
+        t_L[i], t_R[i] = sL, sR
+    _acoustic(C_L, n, rho_L, M, d)
+    if not _sqrt_spd(M, Z_L, Zi, d):
+        return False
+    _acoustic(C_R, n, rho_R, M, d)
+    if not _sqrt_spd(M, Z_R, Zi, d):
+        return False
+    dd = d * d
+    _godunov(t_L, q_L[dd:], t_R, q_R[dd:], Z_L, Z_R, t_s, v_s, A, b, d)
+    return True
+
+
+@njit(cache=True, inline="always")
 def _stress_rate(w, C):
     """M_ia = C_iajb w_jb of a fluctuation w (6,) in 2D, as four scalars (M00, M01, M10, M11):
     the traction rate along n is g = M n, shared by every direction of one face."""
@@ -224,20 +246,10 @@ def _godunov_fluxes_d(Q_L, C_L, rho_L, Q_R, C_R, rho_R, N, flux, fluct_L, fluct_
     t_L, t_R, t_s, v_s = np.empty(d), np.empty(d), np.empty(d), np.empty(d)
     dd = d * d
     for f in range(len(N)):
-        for i in range(d):                               # traction t = P N of each side
-            sL, sR = 0.0, 0.0
-            for a in range(d):
-                sL += Q_L[f, i * d + a] * N[f, a]
-                sR += Q_R[f, i * d + a] * N[f, a]
-            t_L[i], t_R[i] = sL, sR
+        if not _godunov_sides(Q_L[f], C_L[f], rho_L[f], Q_R[f], C_R[f], rho_R[f], N[f], t_L, t_R, M, Z_L, Z_R, Zi,
+                              A, b, t_s, v_s, d):
+            return f
         v_L, v_R = Q_L[f, dd:], Q_R[f, dd:]
-        _acoustic(C_L[f], N[f], rho_L[f], M, d)
-        if not _sqrt_spd(M, Z_L, Zi, d):
-            return f
-        _acoustic(C_R[f], N[f], rho_R[f], M, d)
-        if not _sqrt_spd(M, Z_R, Zi, d):
-            return f
-        _godunov(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s, A, b, d)
         for i in range(d):                               # F_N = -[v (x) N ; t]
             for a in range(d):
                 k = i * d + a
