@@ -6,7 +6,11 @@ points (the facet Gauss points of the cell), the coefficients alpha_K = g(bound 
 componentwise on U = [F, p]. A cell is *troubled* when its DG solution leaves the local bounds
 [min, max] of the neighbouring averages (eq 39) at one of its limiting points; only troubled
 cells are replaced by the limited linear reconstruction u_bar + diag(alpha) grad u_bar (X - X_e)
-(eq 41), so smooth regions keep their order.
+(eq 41), so smooth regions keep their order. The excursion in eq 43 is that of the function eq 41
+limits, the reconstruction grad u_bar (X_K - X_e) (Barth & Jespersen): so the limited solution
+keeps the bounds (BJ) at every limiting point. (The DG solution's own excursion there, with the
+gradient of eq 40, would not: a cell whose DG slope is barely out of bounds but whose neighbours'
+gradient is steep got alpha ~ 1 and a new extremum, which fed energy into limited impacts.)
 
 Componentwise limiting is not frame invariant (L23 §5.3): rotating a whole scene rotates F and p
 (F -> R F R^T, p -> R p) but the bounds [min, max] of each component are not those of the rotated
@@ -77,9 +81,14 @@ class SlopeLimiter:
             self.boundary_table = _table(np.asarray(self.boundary_rows[1]), np.arange(len(self.boundary_rows[1])),
                                          nel, pad=-1)                      # (nel, Kb) boundary rows
 
-    def _invariant_alpha(self, dofs, mean):
+    def _reconstructed(self, grad, cell, X):
+        """grad u_bar (X_K - X_e) of the cells ``cell`` at their limiting points X (rows, d)."""
+        return np.einsum("rcd,rd->rc", grad[cell], X - self.centroid[cell])
+
+    def _invariant_alpha(self, dofs, mean, grad):
         """One factor per cell and block (F, p) from rotation-independent projections, and the
-        troubled cells (a limiting point beyond the projected bound)."""
+        troubled cells (the DG solution beyond the projected bound at a limiting point); the factor
+        limits the reconstruction's excursion, as the componentwise kinds."""
         diffs = [mean[self.neighbours] - mean[:, None, :]]                 # (nel, K, nc)
         T_b, _ = self.boundary_rows
         if T_b.shape[0]:
@@ -92,17 +101,16 @@ class SlopeLimiter:
         alpha = np.ones((self.nel, n_blocks))
         troubled = np.zeros(self.nel, dtype=bool)
         scales = [np.linalg.norm(mean[:, b], axis=1).max() + 1e-300 for b in self.blocks]
-        for T, cell, _ in self.rows:
+        for T, cell, X in self.rows:
             if T.shape[0] == 0:
                 continue
             excursion = T @ dofs - mean[cell]
+            linear = self._reconstructed(grad, cell, X)
             for k, (b, scale) in enumerate(zip(self.blocks, scales)):
-                delta = excursion[:, b]
-                size = np.linalg.norm(delta, axis=1)
-                moved = size > 1e-14 * scale
-                unit = delta / np.where(moved, size, 1.0)[:, None]
-                bound = np.maximum(np.einsum("rkc,rc->rk", diffs[cell][:, :, b], unit).max(axis=1), 0.0)
+                size, bound = _projected_bound(excursion[:, b], diffs[cell][:, :, b], scale)
                 np.logical_or.at(troubled, cell, size > bound + 1e-12 * scale)
+                size, bound = _projected_bound(linear[:, b], diffs[cell][:, :, b], scale)
+                moved = size > 1e-14 * scale
                 ratio = np.clip(bound / np.where(moved, size, 1.0), 0.0, 1e6)
                 np.minimum.at(alpha[:, k], cell, np.where(moved, _g(ratio, self.kind), 1.0))
         per_component = np.ones_like(mean)
@@ -137,7 +145,7 @@ class SlopeLimiter:
         np.add.at(rhs, j, contrib)                  # for j: ((u_i - u_j)/d) (-unit), the same product
         grad = np.einsum("ekd,ecd->eck", self.G_inv, rhs)                   # (nel, nc, d)
         if self.invariant:
-            alpha, troubled = self._invariant_alpha(dofs, mean)
+            alpha, troubled = self._invariant_alpha(dofs, mean, grad)
             return self._replace(dofs, mean, grad, alpha, troubled)
         alpha = np.ones_like(mean)
         troubled = np.zeros(self.nel, dtype=bool)
@@ -149,8 +157,10 @@ class SlopeLimiter:
             bound = np.where(excursion > 0, hi[cell] - mean[cell], lo[cell] - mean[cell])
             out = np.abs(excursion) > np.abs(bound) + 1e-12 * scale
             np.logical_or.at(troubled, cell, out.any(axis=1))
-            moved = np.abs(excursion) > 1e-14 * scale
-            ratio = np.clip(bound / np.where(moved, excursion, 1.0), 0.0, 1e6)    # g(1e6) ~ 1
+            linear = self._reconstructed(grad, cell, X)                     # what alpha scales
+            bound = np.where(linear > 0, hi[cell] - mean[cell], lo[cell] - mean[cell])
+            moved = np.abs(linear) > 1e-14 * scale
+            ratio = np.clip(bound / np.where(moved, linear, 1.0), 0.0, 1e6)    # g(1e6) ~ 1
             np.minimum.at(alpha, cell, np.where(moved, _g(ratio, self.kind), 1.0))
         return self._replace(dofs, mean, grad, alpha, troubled)
 
@@ -164,6 +174,14 @@ class SlopeLimiter:
         out = dofs.copy()
         out[self.st.cell_dofs[cells]] = np.einsum("ebq,eqc->ebc", self.st.point_to_dofs[cells], linear)
         return out, int(len(cells))
+
+
+def _projected_bound(delta, diffs, scale):
+    """|delta| of excursions delta (rows, block) and the bound max(0, max_j diff_j : delta / |delta|)
+    over the neighbour differences diffs (rows, K, block): rotation-independent."""
+    size = np.linalg.norm(delta, axis=1)
+    unit = delta / np.where(size > 1e-14 * scale, size, 1.0)[:, None]
+    return size, np.maximum(np.einsum("rkc,rc->rk", diffs, unit).max(axis=1), 0.0)
 
 
 def _table(owner, value, n, pad=None):
