@@ -10,6 +10,9 @@ plate, +14 % whatever the CFL) is not declared unstable for it, while the growth
 instability, which has not (yet) made the state inadmissible, is caught. The critical CFL is
 bracketed by bisection between a passing and a failing CFL (`critical_cfl`); each (scene, method,
 limiter) chain is one task of the study executor (`skdgmpm.executor`), chains run in parallel.
+A trial also fails when it takes more than ``STEP_BUDGET`` times the baseline's steps without
+reaching t_end: its time step has collapsed (waves stiffening without bound as J -> 0), and
+without a budget such a run grinds on for hours before it fails.
 
 CFL is the scene's ``method.cfl``: Delta t = CFL h_min / c_max for DGMPM, CFL h_min / ((2P+1) c_max)
 for the high-order methods (L23 eq 67).
@@ -25,6 +28,7 @@ from .errors import InputError, InstabilityError
 
 ENERGY_GROWTH = 0.1
 BASELINE = 0.2
+STEP_BUDGET = 10        # trials at CFL >= BASELINE need fewer steps than the baseline run
 
 # method variants: label -> scene overrides (the L23 particle layouts for ADER-DGMPM)
 VARIANTS = {
@@ -67,16 +71,17 @@ class Chain:
     wall_s: float = 0.0
 
 
-def trial(scene, overrides, cfl, allowed_growth=ENERGY_GROWTH):
+def trial(scene, overrides, cfl, allowed_growth=ENERGY_GROWTH, max_steps=None):
     """One run at ``cfl``: a `Trial` (never raises for an unstable run); it fails if the energy
-    balance grows by more than ``allowed_growth`` of the energy scale."""
+    balance grows by more than ``allowed_growth`` of the energy scale, or if it has not reached
+    t_end after ``max_steps`` steps (None: no limit)."""
     from .run import run
 
     start = time.perf_counter()
     try:
         with warnings.catch_warnings():          # CFL above the 1D von Neumann limit: the point here
             warnings.simplefilter("ignore")
-            r = run(scene, [*overrides, f"method.cfl={cfl!r}"], progress=False, frames=1)
+            r = run(scene, [*overrides, f"method.cfl={cfl!r}"], progress=False, frames=1, max_steps=max_steps)
     except InstabilityError as exc:      # raised before the loop (e.g. the first CTU step)
         return Trial(cfl, False, "unstable", str(exc), 0, 0.0, time.perf_counter() - start)
     h = r.history
@@ -87,21 +92,26 @@ def trial(scene, overrides, cfl, allowed_growth=ENERGY_GROWTH):
         passed, reason = False, r.message
     elif growth > allowed_growth:
         passed, reason = False, f"energy blow-up: balance grew by {growth:.3g} of the energy scale (> {allowed_growth:.3g})"
+    elif r.state.t < t_end * (1 - 1e-9):
+        passed, reason = False, (f"time step collapsed: {r.state.step} steps without reaching t_end "
+                                 f"(t = {r.state.t:.4g} s, min J {np.nanmin(h['min_J']):.3g})")
     else:
-        passed, reason = bool(r.state.t >= t_end * (1 - 1e-9)), ""
+        passed, reason = True, ""
     return Trial(cfl, passed, r.status, reason, int(r.state.step), float(r.state.t), time.perf_counter() - start,
                  growth)
 
 
-def critical_cfl(scene, overrides, lo=0.0, hi=1.6, tol=0.05, start=None, allowed_growth=ENERGY_GROWTH):
+def critical_cfl(scene, overrides, lo=0.0, hi=1.6, tol=0.05, start=None, allowed_growth=ENERGY_GROWTH,
+                 max_steps=None):
     """Bisection for the largest passing CFL in (lo, hi]: returns (largest passing, smallest
     failing, trials). ``lo`` is assumed to pass (0 always does), ``hi`` is tried first unless
-    ``start`` is given (then ``start`` first). Stops when hi - lo <= tol."""
+    ``start`` is given (then ``start`` first). Stops when hi - lo <= tol. ``max_steps``: each
+    trial's step budget (`trial`)."""
     trials = []
     passing, failing = lo, np.inf
     cfl = hi if start is None else start
     while True:
-        t = trial(scene, overrides, cfl, allowed_growth)
+        t = trial(scene, overrides, cfl, allowed_growth, max_steps)
         trials.append(t)
         if t.passed:
             passing = max(passing, cfl)
@@ -128,7 +138,7 @@ def _chain_task(chain, lo, hi, tol, baseline=BASELINE):
     else:
         chain.critical_cfl, chain.first_failing_cfl, trials = critical_cfl(
             chain.scene, chain.overrides, max(lo, baseline), hi, tol,
-            allowed_growth=max(base.growth, 0.0) + ENERGY_GROWTH)
+            allowed_growth=max(base.growth, 0.0) + ENERGY_GROWTH, max_steps=STEP_BUDGET * max(base.steps, 1))
         chain.trials = [base, *trials]
     chain.wall_s = time.perf_counter() - start
     return chain

@@ -13,7 +13,7 @@ import pytest
 
 from skdgmpm.cli import main
 from skdgmpm.run import run
-from skdgmpm.stability_study import critical_cfl
+from skdgmpm.stability_study import critical_cfl, trial
 
 PLATE = ["grid.cells=[8,6]", "run.t_end=2e-4", "method.cfl=0.35", 'method.limiter="barth-jespersen"']
 CASES = {   # name: (scene, overrides, stored (steps, min sigma11, max sigma11, min v1, max v1, min J, total energy))
@@ -96,6 +96,19 @@ def test_stability_bisection_finds_the_upwind_limit():
                                             hi=1.6, tol=0.05)
     assert 0.95 <= passing < failing <= 1.1 and failing - passing <= 0.05
     assert {t.cfl for t in trials if not t.passed} >= {1.6, failing}
+
+
+def test_trial_that_outruns_its_step_budget_fails():
+    """A trial that has not reached t_end within its step budget fails and says so (in a study the
+    budget is 10 x the baseline's steps: a collapsing time step would otherwise grind for hours);
+    within the budget the same run passes."""
+    scene = ["grid.cells=20", "run.t_end=1.2e-3", "exact={}"]
+    full = trial("bar_elastic_1d", scene, 0.5)
+    assert full.passed and full.steps > 6
+    cut = trial("bar_elastic_1d", scene, 0.5, max_steps=full.steps // 2)
+    assert not cut.passed and cut.steps == full.steps // 2
+    assert cut.reason.startswith(f"time step collapsed: {full.steps // 2} steps without reaching t_end")
+    assert trial("bar_elastic_1d", scene, 0.5, max_steps=full.steps).passed
 
 
 def test_cfl_limit_and_compare_figures_commands(tmp_path, capsys):
