@@ -21,6 +21,7 @@ from numba import njit
 from skdgmpm.materials.points import tangent_point
 
 from .faces import gather_row
+from .system import scratch
 from .riemann import _acoustic, _acoustic2, _godunov_flux2, _godunov_sides, _sqrt_spd, _sqrt_spd2, _stress_rate
 
 
@@ -155,11 +156,11 @@ def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, p
 def _interior_d(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
                 ctu, topo_L, topo_R, flux, corr, corr_bnd, d):
     nc = d * d + d
-    q_L, q_R = np.empty(nc), np.empty(nc)
-    F_L, F_R = np.empty((3, 3)), np.empty((3, 3))
-    C_L, C_R = np.empty((d, d, d, d)), np.empty((d, d, d, d))
-    M, Z_L, Z_R, Zi, A = np.empty((d, d)), np.empty((d, d)), np.empty((d, d)), np.empty((d, d)), np.empty((d, d))
-    b, t_L, t_R, t_s, v_s = np.empty(d), np.empty(d), np.empty(d), np.empty(d), np.empty(d)
+    q_L, q_R = scratch((nc,)), scratch((nc,))
+    F_L, F_R = scratch((3, 3)), scratch((3, 3))
+    C_L, C_R = scratch((d, d, d, d)), scratch((d, d, d, d))
+    M, Z_L, Z_R, Zi, A = scratch((d, d)), scratch((d, d)), scratch((d, d)), scratch((d, d)), scratch((d, d))
+    b, t_L, t_R, t_s, v_s = scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,))
     for f in range(len(N)):
         rho_L = _gather(T_L, f, U, Q, rho, q_L, F_L, d)
         rho_R = _gather(T_R, f, U, Q, rho, q_R, F_R, d)
@@ -208,7 +209,7 @@ def boundary_sides(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v_L,
 @njit(cache=True, inline="always")
 def _boundary_sides_d(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v_L, Z, C, rho_f, d):
     dd, nc = d * d, d * d + d
-    q, F, M, Zi = np.empty(nc), np.empty((3, 3)), np.empty((d, d)), np.empty((d, d))
+    q, F, M, Zi = scratch((nc,)), scratch((3, 3)), scratch((d, d)), scratch((d, d))
     for f in range(len(N)):
         rho_f[f] = _gather(T, f, U, Q, rho, q, F, d)
         m = cell_material[cell[f]]

@@ -6,8 +6,38 @@
 The flux is linear in Q. State rows are laid out ``[F (row-major d x d), p or v (d)]`` (see
 docs/CONVENTIONS.md); ``d`` is the scene dimension.
 """
+import llvmlite.ir as ir
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
+from numba.np.numpy_support import carray
+
+SCRATCH_SIZE = 81       # entries of a `scratch` array: a (3, 3, 3, 3) tangent
+
+
+@intrinsic
+def _stack_doubles(typingctx):
+    """Pointer to SCRATCH_SIZE doubles on the stack of the compiled function being built."""
+    def codegen(context, builder, signature, args):
+        return cgutils.alloca_once(builder, context.get_value_type(types.float64),
+                                   size=ir.Constant(ir.IntType(64), SCRATCH_SIZE))
+    return types.CPointer(types.float64)(), codegen
+
+
+@njit(cache=True, inline="always")
+def scratch(shape):
+    """Uninitialised float array of ``shape`` (at most SCRATCH_SIZE entries) on the stack of the
+    compiled function that calls it, for the per-point scratch of the compiled loops: unlike
+    ``np.empty`` (heap memory the compiler must assume any other array may alias), its entries
+    stay in registers once the loops over it are unrolled (a literal d). It lives as long as that
+    function's call: never return it or keep it in another object."""
+    n = 1
+    for s in shape:
+        n *= s
+    if n > SCRATCH_SIZE:
+        raise ValueError("scratch: more than SCRATCH_SIZE entries")
+    return carray(_stack_doubles(), shape)
 
 
 def n_components(d):
@@ -94,7 +124,7 @@ def _volume_flux(Q, indptr, indices, data, alphas, d, R):
 @njit(cache=True, inline="always")
 def _volume_flux_d(Q, indptr, indices, data, alphas, R, d):
     dd, m = d * d, len(data)
-    sv, sP = np.empty((m, d)), np.empty((m, d))
+    sv, sP = scratch((m, d)), scratch((m, d))
     for r in range(len(indptr) - 1):
         for j in range(m):
             for i in range(d):
