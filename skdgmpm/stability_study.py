@@ -25,6 +25,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .errors import InputError, InstabilityError
+from .limiter import KINDS
 
 ENERGY_GROWTH = 0.1
 BASELINE = 0.2
@@ -41,7 +42,7 @@ VARIANTS = {
     "ader-dgfem S2T2": ['method.name="ader-dgfem"', "method.order=2"],
     "ader-dgmpm S2T2": ['method.name="ader-dgmpm"', "method.order=2", "particles.per_cell=[0.25, 0.5, 0.75]"],
 }
-LIMITERS = ("none", "barth-jespersen", "barth-jespersen-invariant")
+LIMITERS = KINDS           # every kind of `skdgmpm.limiter`
 
 
 @dataclass

@@ -64,7 +64,8 @@ def oblique_step(order, kind):
     return st, st.project(U)
 
 
-@pytest.mark.parametrize("kind", ["barth-jespersen", "venkatakrishnan"])
+@pytest.mark.parametrize("kind", ["barth-jespersen", "venkatakrishnan", "barth-jespersen-scaled",
+                                  "venkatakrishnan-scaled"])
 @pytest.mark.parametrize("order", [1, 2])
 def test_limited_reconstruction_keeps_the_bounds_in_2d(kind, order):
     """Eq 43's excursion is the one of the reconstruction that alpha scales (eq 41): the limited
@@ -83,7 +84,8 @@ def test_limited_reconstruction_keeps_the_bounds_in_2d(kind, order):
     assert np.allclose(lim.averages(limited), mean, rtol=0, atol=1e-12)
 
 
-@pytest.mark.parametrize("kind", ["barth-jespersen-invariant", "venkatakrishnan-invariant"])
+@pytest.mark.parametrize("kind", ["barth-jespersen-invariant", "venkatakrishnan-invariant",
+                                  "barth-jespersen-invariant-scaled"])
 def test_invariant_limiter_keeps_the_projected_bounds(kind):
     """Frame-invariant kinds: at every limiting point of a limited cell, the excursion of each
     block (F, p) from the average, projected on its own direction, stays below the largest
@@ -111,6 +113,28 @@ def test_invariant_limiter_keeps_the_projected_bounds(kind):
                 bound = max(0.0, max((u[block] - mean[c, block]) @ delta / size for u in others[c]))
                 assert size <= bound + 1e-9 * np.abs(mean[:, block]).max() or np.array_equal(
                     limited[st.cell_dofs[c]], dofs[st.cell_dofs[c]])             # untroubled: its own DG values
+
+
+@pytest.mark.parametrize("kind", ["barth-jespersen-scaled", "barth-jespersen-invariant-scaled"])
+@pytest.mark.parametrize("order", [1, 2])
+def test_scaled_kinds_only_shrink_the_cells_own_deviation(kind, order):
+    """-scaled kinds: in a limited cell every Gauss-point value is u_bar + alpha (u_h - u_bar) with
+    0 <= alpha <= 1 per component (per block for -invariant): no component gets steeper, its sign
+    pattern inside the cell is kept, and the kinetic energy |p|^2 of a cell never grows."""
+    st, dofs = oblique_step(order, kind)
+    lim = st.slope_limiter
+    limited, n = lim(dofs)
+    mean = lim.averages(dofs)[:, None, :]
+    before = (st.B @ dofs).reshape(lim.nel, lim.nq, -1) - mean
+    now = (st.B @ limited).reshape(lim.nel, lim.nq, -1) - mean
+    assert n >= 10
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.where(np.abs(before) > 1e-12, now / before, 1.0)
+    factor = ratio.min(axis=1)                              # one factor per cell and component
+    assert np.all((factor >= -1e-12) & (factor <= 1 + 1e-12))
+    assert np.allclose(now, factor[:, None, :] * before, rtol=0, atol=1e-12 * np.abs(before).max())
+    kinetic = lambda dev: np.einsum("eq,eqc->e", lim.w, dev[:, :, 4:] ** 2)   # noqa: E731
+    assert np.all(kinetic(now) <= kinetic(before) * (1 + 1e-12))
 
 
 @pytest.mark.parametrize("order", [1, 2, 3])
