@@ -46,18 +46,21 @@ def _acoustic(C, n, rho, M, d):
 
 @njit(cache=True, inline="always")
 def _sqrt_spd2(m00, m01, m10, m11):
-    """sqrt(M) = (M + s I) / sqrt(tr M + 2 s), s = sqrt(det M), and its inverse for a symmetric
-    2 x 2 M: (ok, Z00, Z01, Z10, Z11, Zi00, Zi01, Zi10, Zi11), ok False where M is not positive
-    definite (scalars, so the 2D kernels keep them in registers)."""
+    """sqrt(M) = (M + s I) / q, q = sqrt(tr M + 2 s), s = sqrt(det M), and its inverse
+    adj(M + s I) / (q s) (det sqrt(M) = s) for a symmetric 2 x 2 M: (ok, Z00, Z01, Z10, Z11,
+    Zi00, Zi01, Zi10, Zi11), ok False where M is not positive definite (the values are then
+    meaningless). Scalars and no branch, so the 2D kernels keep them in registers and overlap the
+    square roots of several impedances."""
     det = m00 * m11 - m01 * m10
     tr = m00 + m11
-    if not (det > 0 and tr > 0):
-        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    ok = (det > 0) & (tr > 0)
+    det, tr = (det, tr) if ok else (1.0, 1.0)       # not ok: finite values, never used
     s = np.sqrt(det)
     q = np.sqrt(tr + 2 * s)
-    z00, z01, z10, z11 = (m00 + s) / q, m01 / q, m10 / q, (m11 + s) / q
-    det_z = z00 * z11 - z01 * z10
-    return True, z00, z01, z10, z11, z11 / det_z, -z01 / det_z, -z10 / det_z, z00 / det_z
+    r = 1.0 / q                         # det Z = s: one division serves Z and Z^-1
+    ri = r / s
+    return (ok, (m00 + s) * r, m01 * r, m10 * r, (m11 + s) * r,
+            (m11 + s) * ri, -m01 * ri, -m10 * ri, (m00 + s) * ri)
 
 
 @njit(cache=True, inline="always")
