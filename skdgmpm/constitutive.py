@@ -7,7 +7,7 @@ from numba import njit
 
 from skdgmpm.materials.points import law_table, stress_point
 
-from .system import embed
+from .system import embed, scratch
 
 
 @njit(cache=True)
@@ -22,7 +22,7 @@ def _states(laws, params, index, U, rho, Q):
 @njit(cache=True, inline="always")
 def _states_d(laws, params, index, U, rho, Q, d):
     dd = d * d
-    F, P = np.empty((3, 3)), np.empty((d, d))
+    F, P = scratch((3, 3)), scratch((d, d))
     for k in range(len(U)):
         for i in range(3):
             for a in range(3):

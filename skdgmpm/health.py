@@ -13,6 +13,7 @@ from numba import njit
 
 from skdgmpm.materials.points import tangent_point
 from .riemann import _acoustic, _acoustic2
+from .system import scratch
 
 
 def directions(d):
@@ -86,9 +87,7 @@ def _assess(U, Q, material, laws, params, rho, N, n_axes, finite, J, lowest, spe
 
 @njit(cache=True, inline="always")
 def _assess_d(U, Q, material, laws, params, rho, N, n_axes, finite, J, lowest, speed, d):
-    F = np.empty((3, 3))
-    C = np.empty((d, d, d, d))
-    A = np.empty((d, d))
+    F, C, A = scratch((3, 3)), scratch((d, d, d, d)), scratch((d, d))
     for p in range(len(U)):
         ok = True
         for k in range(U.shape[1]):
@@ -114,7 +113,8 @@ def _assess_d(U, Q, material, laws, params, rho, N, n_axes, finite, J, lowest, s
                 n0, n1 = N[k, 0], N[k, 1]
                 a00, a11 = _acoustic2(C, 0, 0, n0, n1), _acoustic2(C, 1, 1, n0, n1)
                 mean = 0.5 * (a00 + a11)
-                r = np.hypot(0.5 * (a00 - a11), 0.5 * (_acoustic2(C, 0, 1, n0, n1) + _acoustic2(C, 1, 0, n0, n1)))
+                x, y = 0.5 * (a00 - a11), 0.5 * (_acoustic2(C, 0, 1, n0, n1) + _acoustic2(C, 1, 0, n0, n1))
+                r = np.sqrt(x * x + y * y)
                 small, large = mean - r, mean + r
             else:
                 _acoustic(C, N[k], 1.0, A, d)
