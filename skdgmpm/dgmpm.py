@@ -16,16 +16,19 @@ the time the boundary values are taken).
 The volume term and the interior faces depend on Delta t only through the factor of the CTU
 corrections: they are computed once per projected state (``fixed_terms``), and an attempt that the
 CFL guard repeats with a smaller Delta t reuses them (the boundary pass, which depends on time, and
-everything after it are redone).
+everything after it are redone). A stage of ``advance`` is one compiled pass over the nodes,
+U + dt M^-1 (volume term + interior faces), the interior faces' integral gathered node by node,
+to which the boundary faces' terms are then added, weighted by dt M^-1 (no residual array).
 """
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
 
 from skdgmpm.materials.points import law_table
 
 from . import system
-from .dgmpm_kernels import boundary_pass, boundary_sides, integrate_faces, integrate_interior, interior_pass
+from .dgmpm_kernels import boundary_pass, boundary_sides, euler_update, integrate_faces, interior_pass
 from .errors import InputError
 from .faces import interior_faces
 from .quadrature import ParticleMap, VolumeOperators, interpolation_matrix, particle_basis
@@ -83,6 +86,10 @@ class DGMPM(GodunovScheme):
         self.laws = law_table(self.materials.materials)          # the compiled point laws
         self.traces = {"L": _csr(self.interior.T_L), "R": _csr(self.interior.T_R),
                        "boundary": _csr(self.boundary.T_L)}
+        # -int Phi F* over the interior faces as a gather over each node's faces (`euler_update`)
+        f = self.interior
+        self.gather_interior = _csr((sp.diags(f.measure) @ (f.T_R - f.T_L)).T.tocsr())
+        self.inv_M = 1.0 / self.ops.lumped
 
     # ---------------------------------------------------------------- set-up
     def _setup_transverse(self):
@@ -145,10 +152,11 @@ class DGMPM(GodunovScheme):
             _not_hyperbolic(bad)
         return flux, corr, corr_bnd
 
-    def boundary_flux(self, grid_state, time, dt, R, corr_bnd):
+    def boundary_flux(self, grid_state, time, dt, weight, R, corr_bnd):
         """(d) ghost states -> boundary stationary states (t*, v*) and fluxes (nb, nc), with (CTU)
         the transverse corrections of the fluctuations entering the boundary cells (into R at
-        interior edges, into corr_bnd at boundary edges); returns the fluxes and (t*, v*)."""
+        interior edges, weighted per node by ``weight``, into corr_bnd at boundary edges); returns
+        the fluxes and (t*, v*)."""
         b, d = self.boundary, self.d
         nb = len(b)
         t_L, v_L, Z, rho = np.empty((nb, d)), np.empty((nb, d)), np.empty((nb, d, d)), np.empty(nb)
@@ -162,7 +170,7 @@ class DGMPM(GodunovScheme):
             t_s[sel], v_s[sel] = bc.star(time, t_L[sel], v_L[sel], Z[sel], b.normal[sel])
         flux = np.zeros((nb, system.n_components(d)))
         bad = boundary_pass(b.normal, t_L, v_L, t_s, v_s, C, rho, dt, self.ctu is not None, self.topology["boundary"],
-                            self.traces["L"], self.traces["R"], self.interior.measure, flux, R, corr_bnd)
+                            self.traces["L"], self.traces["R"], self.interior.measure, flux, weight, R, corr_bnd)
         if bad >= 0:
             _not_hyperbolic(bad)
         return flux, t_s, v_s
@@ -192,14 +200,14 @@ class DGMPM(GodunovScheme):
             return self._kept[1]
         return (self.volume_flux(grid_state), *self.interface_flux(grid_state))
 
-    def surface_residual(self, grid_state, time, dt, out=None, interior=None):
-        """-int Phi F_N* over all faces (added to ``out`` if given; ``interior``: the result of
-        `interface_flux` if known); also returns the power through the boundary (W)."""
-        b, nc = self.boundary, grid_state.U.shape[1]
-        flux_int, corr, corr_bnd = self.interface_flux(grid_state) if interior is None else interior
-        R = np.zeros((self.n_dofs, nc)) if out is None else out
+    def add_boundary_terms(self, grid_state, time, dt, corr_bnd, weight, out):
+        """out += weight (-int Phi F_N* over the boundary faces, with the CTU corrections that
+        they send to interior edges, + int Phi S): the Delta t-dependent part of M dU/dt, weighted
+        per node (``corr_bnd``: the interior pass's corrections per unit Delta t of the boundary
+        faces' fluxes); returns the power through the boundary (W)."""
+        b = self.boundary
         corr_bnd = dt * corr_bnd
-        flux, t_s, v_s = self.boundary_flux(grid_state, time, dt, R, corr_bnd)
+        flux, t_s, v_s = self.boundary_flux(grid_state, time, dt, weight, out, corr_bnd)
         if self.ctu is None:
             power = float(np.sum(b.measure * np.einsum("fi,fi->f", t_s, v_s)))
         else:                                               # work of the corrected boundary flux
@@ -207,33 +215,36 @@ class DGMPM(GodunovScheme):
             F, p = system.split(flux, self.d)
             v = -np.einsum("fia,fa->fi", F, b.normal)
             power = float(np.sum(b.measure * np.einsum("fi,fi->f", -p, v)))
-        integrate_interior(self.traces["L"], self.traces["R"], self.interior.measure, flux_int, corr, dt, R)
-        integrate_faces(self.traces["boundary"], b.measure, -1.0, flux, R)
-        return R, power
-
-    def residual(self, grid_state, time, dt):
-        """M dU/dt = K^alpha F_alpha - int Phi F_N* + int Phi S; also returns the boundary power (W)."""
-        volume, *interior = self.fixed_terms(grid_state)
-        R, power = self.surface_residual(grid_state, time, dt, volume.copy(), interior)
+        integrate_faces(self.traces["boundary"], b.measure, -1.0, flux, weight, out)
         if self.body_force is not None:          # int Phi rho0 b, the particles as quadrature
-            R += self.map.S.T @ (self.particles.volume[:, None] * self.source(self.particles, time))
-        return R, power
+            source = self.particles.volume[:, None] * self.source(self.particles, time)
+            out += weight[:, None] * (self.map.S.T @ source)
+        return power
+
+    def euler_stage(self, grid_state, base, time, dt, step):
+        """base + step M^-1 R, M dU/dt = R = K^alpha F_alpha - int Phi F_N* + int Phi S at
+        ``grid_state`` (boundary values at ``time``, CTU corrections for ``dt``): the volume term
+        and the interior faces in one pass over the nodes (`euler_update`), then the boundary
+        faces and the source; also returns the boundary power (W)."""
+        volume, flux, corr, corr_bnd = self.fixed_terms(grid_state)
+        weight = step * self.inv_M
+        out = np.empty_like(base)
+        euler_update(self.gather_interior, flux, corr, dt, volume, base, weight, out)
+        power = self.add_boundary_terms(grid_state, time, dt, corr_bnd, weight, out)
+        return out, power
 
     def advance(self, grid_state, time, dt):
         """(f) forward Euler [R18 eq 20] or Heun's RK2, both stages on the grid."""
-        inv_M = 1.0 / self.ops.lumped[:, None]
         # Euler takes boundary values at mid-step (the step's mean for a ramp; a release at
         # t_u = n dt is not missed through round-off in t); Heun at its stage times
-        R, power = self.residual(grid_state, time + (0.5 * dt if self.integrator == "euler" else 0.0), dt)
-        R *= dt * inv_M                 # in place: U1 = U + dt M^-1 R without state-sized temporaries
-        U1 = np.add(R, grid_state.U, out=R)
+        U = grid_state.U
         if self.integrator == "euler":
+            U1, power = self.euler_stage(grid_state, U, time + 0.5 * dt, dt, dt)
             return U1, dt * power
-        R2, power2 = self.residual(self.nodal_state(U1), time + dt, dt)
-        R2 *= dt * inv_M                # 0.5 (U + U1 + dt M^-1 R2), in place likewise
-        R2 += np.add(U1, grid_state.U, out=U1)
-        R2 *= 0.5
-        return R2, 0.5 * dt * (power + power2)
+        U1, power = self.euler_stage(grid_state, U, time, dt, dt)
+        # 0.5 (U + U1 + dt M^-1 R2)
+        U2, power2 = self.euler_stage(self.nodal_state(U1), 0.5 * (U + U1), time + dt, dt, 0.5 * dt)
+        return U2, 0.5 * dt * (power + power2)
 
     def nodal_state(self, U):
         """Q at the nodes from U at the nodes (the law evaluated at nodes, RK2 second stage)."""

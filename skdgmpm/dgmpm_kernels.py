@@ -7,8 +7,8 @@ functions) and, for CTU, splits each fluctuation on the characteristic basis of 
 the cell it enters as soon as it is known, adding those corrections to the edges' fluxes. The
 corrections are proportional to Delta t (G = -dt / (2 h) B+ A dU): the interior pass stores them
 per unit Delta t, so that a repeated attempt of the CFL guard reuses the whole pass; the boundary
-pass (its stationary states depend on time) is redone, and `integrate_interior` adds
--int Phi (F* + dt G) to the residual.
+pass (its stationary states depend on time) is redone, and `euler_update` adds
+-int Phi (F* + dt G) to the residual as it advances the nodes.
 
 Face-set arrays as in `skdgmpm.faces` ((nf, d) normals, (nf,) measures); a trace is the triple
 (indptr, indices, data) of its CSR matrix; a CTU topology of one face side is
@@ -39,13 +39,14 @@ def _gather(trace, f, U, Q, rho, q, F, d):
 
 
 @njit(cache=True, inline="always")
-def _integrate(trace, f, scale, value, R):
-    """R[i] += T[f, i] (scale value) over row f of a trace (value an array or a tuple)."""
+def _integrate(trace, f, scale, value, w, R):
+    """R[i] += w[i] T[f, i] (scale value) over row f of a trace (value an array or a tuple; w a
+    weight per node)."""
     indptr, indices, data = trace
     for k in range(indptr[f], indptr[f + 1]):
-        n, w = indices[k], data[k]
+        n, t = indices[k], data[k]
         for c in range(len(value)):
-            R[n, c] += w * (scale * value[c])
+            R[n, c] += w[n] * (t * (scale * value[c]))
 
 
 @njit(cache=True, inline="always")
@@ -226,11 +227,12 @@ def _boundary_sides_d(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v
 
 
 @njit(cache=True)
-def boundary_pass(N, t_L, v_L, t_s, v_s, C, rho_f, dt, ctu, topo, T_L, T_R, measure, flux, R, corr_bnd):
+def boundary_pass(N, t_L, v_L, t_s, v_s, C, rho_f, dt, ctu, topo, T_L, T_R, measure, flux, weight, R, corr_bnd):
     """Flux F_N(t*, v*) of every boundary face added to flux (nf, nc) (zero on entry) and, with
     ``ctu``, the transverse corrections of the fluctuation F_N(t*, v*) - F_N(t_L, v_L) entering
-    the cell: an interior edge's integrated at once into R (through the interior traces T_L, T_R
-    and face measures: few faces), a boundary edge's added to corr_bnd. Returns the first face
+    the cell: an interior edge's integrated at once into R, weighted per node by ``weight``
+    (through the interior traces T_L, T_R and face measures: few faces), a boundary edge's added
+    to corr_bnd. Returns the first face
     whose acoustic tensor along an edge is not positive definite, or -1."""
     d = N.shape[1]
     for f in range(len(N)):
@@ -245,31 +247,47 @@ def boundary_pass(N, t_L, v_L, t_s, v_s, C, rho_f, dt, ctu, topo, T_L, T_R, meas
                 return f
             j = edge_int[0, f]
             if j >= 0:
-                _integrate(T_L, j, -sign[0, f] * measure[j], G_0, R)
-                _integrate(T_R, j, sign[0, f] * measure[j], G_0, R)
+                _integrate(T_L, j, -sign[0, f] * measure[j], G_0, weight, R)
+                _integrate(T_R, j, sign[0, f] * measure[j], G_0, weight, R)
             j = edge_int[1, f]
             if j >= 0:
-                _integrate(T_L, j, -sign[1, f] * measure[j], G_1, R)
-                _integrate(T_R, j, sign[1, f] * measure[j], G_1, R)
+                _integrate(T_L, j, -sign[1, f] * measure[j], G_1, weight, R)
+                _integrate(T_R, j, sign[1, f] * measure[j], G_1, weight, R)
             _add_boundary_edges(edge_bnd, f, G_0, G_1, corr_bnd)
     return -1
 
 
 @njit(cache=True)
-def integrate_interior(T_L, T_R, measure, flux, corr, dt, R):
-    """R += T_R^T (measure F) - T_L^T (measure F) with F = flux + dt corr (nf, nc): the surface
-    integral over the interior faces, in face order."""
-    F = np.empty(flux.shape[1])
-    for f in range(len(measure)):
-        for k in range(len(F)):
-            F[k] = flux[f, k] + dt * corr[f, k]
-        _integrate(T_L, f, -measure[f], F, R)
-        _integrate(T_R, f, measure[f], F, R)
+def euler_update(gather, flux, corr, dt, volume, base, w, out):
+    """out = base + w (volume + G (flux + dt corr)) node by node: a forward Euler stage but its
+    boundary terms in one pass over the nodes, given the volume term (n_dofs, nc), the interior
+    faces' fluxes and corrections per unit Delta t (nf, nc) and w = (step) M^-1 (n_dofs,).
+    G (n_dofs, nf) is the interior surface integral as a gather (`DGMPM.gather_interior`): row i
+    holds measure_f (T_R - T_L)[f, i] over the faces f of node i."""
+    if flux.shape[1] == 6:              # 2D states: a literal width, the loops unrolled
+        _euler_update_nc(gather, flux, corr, dt, volume, base, w, out, 6)
+    else:
+        _euler_update_nc(gather, flux, corr, dt, volume, base, w, out, flux.shape[1])
+
+
+@njit(cache=True, inline="always")
+def _euler_update_nc(gather, flux, corr, dt, volume, base, w, out, nc):
+    indptr, indices, data = gather
+    r = scratch((nc,))
+    for i in range(len(indptr) - 1):
+        for c in range(nc):
+            r[c] = volume[i, c]
+        for k in range(indptr[i], indptr[i + 1]):
+            f, g = indices[k], data[k]
+            for c in range(nc):
+                r[c] += g * (flux[f, c] + dt * corr[f, c])
+        for c in range(nc):
+            out[i, c] = base[i, c] + w[i] * r[c]
 
 
 @njit(cache=True)
-def integrate_faces(T, measure, scale, flux, R):
-    """R += scale T^T (measure flux): the surface integral of face-constant fluxes (nf, nc), in
-    face order."""
+def integrate_faces(T, measure, scale, flux, w, R):
+    """R += w scale T^T (measure flux): the surface integral of face-constant fluxes (nf, nc), in
+    face order, weighted per node by w (n_dofs,)."""
     for f in range(len(measure)):
-        _integrate(T, f, scale * measure[f], flux[f], R)
+        _integrate(T, f, scale * measure[f], flux[f], w, R)
