@@ -60,8 +60,9 @@ def _inverse_transpose(F):
     J = a * c00 + b * c01 + c * c02
     if not J > 0.0:
         return False, 1.0, (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
-    return True, J, (c00 / J, c01 / J, c02 / J, (c * h - b * i) / J, (a * i - c * g) / J, (b * g - a * h) / J,
-                     (b * f - c * e) / J, (c * d - a * f) / J, (a * e - b * d) / J)
+    r = 1.0 / J                         # one division (they dominate the point laws' cost)
+    return True, J, (c00 * r, c01 * r, c02 * r, (c * h - b * i) * r, (a * i - c * g) * r, (b * g - a * h) * r,
+                     (b * f - c * e) * r, (c * d - a * f) * r, (a * e - b * d) * r)
 
 
 def cofactor(F):

@@ -13,6 +13,8 @@ from skfem import CellBasis
 
 from skdgmpm import forms
 
+from .system import scratch
+
 
 def cell_slots(cell, n_cells):
     """Per-cell padding of particles: (n_max, slot) with slot (n_particles,) the flat index of each
@@ -142,17 +144,27 @@ class ParticleMap:
 def _project_state(indptr, indices, data, U, Q, rho, dd, U_n, Q_n):
     """U_n = P2G U, Q_n = [P2G P, p_n / rho] (each row's products summed in CSR order, as
     scipy's product does)."""
-    nc = U.shape[1]
+    if U.shape[1] == 6:                 # 2D states: a literal width, the loops unrolled
+        _project_state_nc(indptr, indices, data, U, Q, rho, 4, U_n, Q_n, 6)
+    else:
+        _project_state_nc(indptr, indices, data, U, Q, rho, dd, U_n, Q_n, U.shape[1])
+
+
+@njit(cache=True, inline="always")
+def _project_state_nc(indptr, indices, data, U, Q, rho, dd, U_n, Q_n, nc):
+    u, q = scratch((nc,)), scratch((nc,))       # the row's sums, in registers
     for r in range(len(indptr) - 1):
         for c in range(nc):
-            U_n[r, c] = 0.0
-        for c in range(dd):
-            Q_n[r, c] = 0.0
+            u[c], q[c] = 0.0, 0.0
         for k in range(indptr[r], indptr[r + 1]):
             p, w = indices[k], data[k]
             for c in range(nc):
-                U_n[r, c] += w * U[p, c]
+                u[c] += w * U[p, c]
             for c in range(dd):
-                Q_n[r, c] += w * Q[p, c]
+                q[c] += w * Q[p, c]
+        for c in range(nc):
+            U_n[r, c] = u[c]
+        for c in range(dd):
+            Q_n[r, c] = q[c]
         for c in range(dd, nc):
-            Q_n[r, c] = U_n[r, c] / rho[r]
+            Q_n[r, c] = u[c] / rho[r]

@@ -201,7 +201,8 @@ def _godunov_flux2(Q_L, C_L, rho_L, Q_R, C_R, rho_R, n0, n1):
     c0 = tR0 - tL0 + (a00 * vL0 + a01 * vL1) + (b00 * vR0 + b01 * vR1)
     c1 = tR1 - tL1 + (a10 * vL0 + a11 * vL1) + (b10 * vR0 + b11 * vR1)
     det = A00 * A11 - A01 * A10
-    vs0, vs1 = (A11 * c0 - A01 * c1) / det, (A00 * c1 - A10 * c0) / det
+    r = 1.0 / det
+    vs0, vs1 = (A11 * c0 - A01 * c1) * r, (A00 * c1 - A10 * c0) * r
     ts0 = tL0 + (a00 * (vs0 - vL0) + a01 * (vs1 - vL1))
     ts1 = tL1 + (a10 * (vs0 - vL0) + a11 * (vs1 - vL1))
     return okL and okR, ts0, ts1, vs0, vs1
