@@ -125,7 +125,7 @@ class DGMPM(GodunovScheme):
         for sel, bc in self.bc_groups:
             frame[sel], imp_v, imp_t = bc.constraints(self.boundary.normal[sel])
             free_v[sel], free_t[sel] = ~imp_v, ~imp_t
-        self.ctu = (frame, free_v, free_t)
+        self.ctu = self._boundary_filter(frame, free_v, free_t)
 
     # ---------------------------------------------------------------- stages
     def project(self, state):
@@ -182,13 +182,23 @@ class DGMPM(GodunovScheme):
         moving out through an edge becomes the extra flux G = -dt / (2 h) B+ A dU there, h the cell
         size across the source face; at a boundary edge the ghost cell is a copy of the cell and
         sends back the cell's own correction through the opposite edge. The face passes compute
-        them with the fluxes.)"""
-        frame, free_v, free_t = self.ctu
-        F, p = system.split(corr_bnd, self.d)
-        dv = np.einsum("fkj,fja,fa->fk", frame, F, self.boundary.normal) * free_v
-        dt_ = np.einsum("fkj,fj->fk", frame, p) * free_t
-        return system.join(np.einsum("fkj,fk->fj", frame, dv)[:, :, None] * self.boundary.normal[:, None, :],
-                           np.einsum("fkj,fk->fj", frame, dt_))
+        them with the fluxes.) The filter is linear: its matrix per face is built once
+        (``_boundary_filter``)."""
+        return np.einsum("fkj,fj->fk", self.ctu, corr_bnd)
+
+    def _boundary_filter(self, frame, free_v, free_t):
+        """The matrix (nb, nc, nc) of `transverse_flux` (linear in the corrections): the components
+        left free by each boundary face's condition, in its frame (nb, 2, 2)."""
+        nb, nc = len(self.boundary), system.n_components(self.d)
+        filt = np.empty((nb, nc, nc))
+        for c in range(nc):             # the filter of each unit correction: a column
+            F, p = system.split(np.broadcast_to(np.eye(nc)[c], (nb, nc)), self.d)
+            dv = np.einsum("fkj,fja,fa->fk", frame, F, self.boundary.normal) * free_v
+            dt_ = np.einsum("fkj,fj->fk", frame, p) * free_t
+            filt[:, :, c] = system.join(
+                np.einsum("fkj,fk->fj", frame, dv)[:, :, None] * self.boundary.normal[:, None, :],
+                np.einsum("fkj,fk->fj", frame, dt_))
+        return filt
 
     def fixed_terms(self, grid_state):
         """The volume term and `interface_flux` of a grid state: they depend on Delta t only
