@@ -213,8 +213,9 @@ class DGMPM(GodunovScheme):
     def add_boundary_terms(self, grid_state, time, dt, corr_bnd, weight, out):
         """out += weight (-int Phi F_N* over the boundary faces, with the CTU corrections that
         they send to interior edges, + int Phi S): the Delta t-dependent part of M dU/dt, weighted
-        per node (``corr_bnd``: the interior pass's corrections per unit Delta t of the boundary
-        faces' fluxes); returns the power through the boundary (W)."""
+        per node by weight = (step, inv_M): step inv_M[i] (``corr_bnd``: the interior pass's
+        corrections per unit Delta t of the boundary faces' fluxes); returns the power through the
+        boundary (W)."""
         b = self.boundary
         corr_bnd = dt * corr_bnd
         flux, t_s, v_s = self.boundary_flux(grid_state, time, dt, weight, out, corr_bnd)
@@ -228,7 +229,7 @@ class DGMPM(GodunovScheme):
         integrate_faces(self.traces["boundary"], b.measure, -1.0, flux, weight, out)
         if self.body_force is not None:          # int Phi rho0 b, the particles as quadrature
             source = self.particles.volume[:, None] * self.source(self.particles, time)
-            out += weight[:, None] * (self.map.S.T @ source)
+            out += (weight[0] * weight[1])[:, None] * (self.map.S.T @ source)
         return power
 
     def euler_stage(self, grid_state, base, time, dt, step):
@@ -237,7 +238,7 @@ class DGMPM(GodunovScheme):
         and the interior faces in one pass over the nodes (`euler_update`), then the boundary
         faces and the source; also returns the boundary power (W)."""
         volume, flux, corr, corr_bnd = self.fixed_terms(grid_state)
-        weight = step * self.inv_M
+        weight = (step, self.inv_M)              # step M^-1, node by node
         out = np.empty_like(base)
         euler_update(self.gather_interior, flux, corr, dt, volume, base, weight, out)
         power = self.add_boundary_terms(grid_state, time, dt, corr_bnd, weight, out)

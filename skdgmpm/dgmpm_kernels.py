@@ -40,13 +40,15 @@ def _gather(trace, f, U, Q, rho, q, F, d):
 
 @njit(cache=True, inline="always")
 def _integrate(trace, f, scale, value, w, R):
-    """R[i] += w[i] T[f, i] (scale value) over row f of a trace (value an array or a tuple; w a
-    weight per node)."""
+    """R[i] += w_i T[f, i] (scale value) over row f of a trace (value an array or a tuple), with
+    the node weights w = (step, inv_M): w_i = step inv_M[i]."""
     indptr, indices, data = trace
+    step, inv_M = w
     for k in range(indptr[f], indptr[f + 1]):
         n, t = indices[k], data[k]
+        w_n = step * inv_M[n]
         for c in range(len(value)):
-            R[n, c] += w[n] * (t * (scale * value[c]))
+            R[n, c] += w_n * (t * (scale * value[c]))
 
 
 @njit(cache=True, inline="always")
@@ -231,6 +233,7 @@ def boundary_pass(N, t_L, v_L, t_s, v_s, C, rho_f, dt, ctu, topo, T_L, T_R, meas
     """Flux F_N(t*, v*) of every boundary face added to flux (nf, nc) (zero on entry) and, with
     ``ctu``, the transverse corrections of the fluctuation F_N(t*, v*) - F_N(t_L, v_L) entering
     the cell: an interior edge's integrated at once into R, weighted per node by ``weight``
+    ((step, inv_M) as in `_integrate`)
     (through the interior traces T_L, T_R and face measures: few faces), a boundary edge's added
     to corr_bnd. Returns the first face
     whose acoustic tensor along an edge is not positive definite, or -1."""
@@ -258,21 +261,23 @@ def boundary_pass(N, t_L, v_L, t_s, v_s, C, rho_f, dt, ctu, topo, T_L, T_R, meas
 
 
 @njit(cache=True)
-def euler_update(gather, flux, corr, dt, volume, base, w, out):
+def euler_update(gather, flux, corr, dt, volume, base, weight, out):
     """out = base + w (volume + G (flux + dt corr)) node by node: a forward Euler stage but its
     boundary terms in one pass over the nodes, given the volume term (n_dofs, nc), the interior
-    faces' fluxes and corrections per unit Delta t (nf, nc) and w = (step) M^-1 (n_dofs,).
+    faces' fluxes and corrections per unit Delta t (nf, nc) and w = step M^-1 given as
+    ``weight`` = (step, inv_M (n_dofs,)).
     G (n_dofs, nf) is the interior surface integral as a gather (`DGMPM.gather_interior`): row i
     holds measure_f (T_R - T_L)[f, i] over the faces f of node i."""
     if flux.shape[1] == 6:              # 2D states: a literal width, the loops unrolled
-        _euler_update_nc(gather, flux, corr, dt, volume, base, w, out, 6)
+        _euler_update_nc(gather, flux, corr, dt, volume, base, weight, out, 6)
     else:
-        _euler_update_nc(gather, flux, corr, dt, volume, base, w, out, flux.shape[1])
+        _euler_update_nc(gather, flux, corr, dt, volume, base, weight, out, flux.shape[1])
 
 
 @njit(cache=True, inline="always")
-def _euler_update_nc(gather, flux, corr, dt, volume, base, w, out, nc):
+def _euler_update_nc(gather, flux, corr, dt, volume, base, weight, out, nc):
     indptr, indices, data = gather
+    step, inv_M = weight
     r = scratch((nc,))
     for i in range(len(indptr) - 1):
         for c in range(nc):
@@ -282,12 +287,12 @@ def _euler_update_nc(gather, flux, corr, dt, volume, base, w, out, nc):
             for c in range(nc):
                 r[c] += g * (flux[f, c] + dt * corr[f, c])
         for c in range(nc):
-            out[i, c] = base[i, c] + w[i] * r[c]
+            out[i, c] = base[i, c] + (step * inv_M[i]) * r[c]
 
 
 @njit(cache=True)
 def integrate_faces(T, measure, scale, flux, w, R):
     """R += w scale T^T (measure flux): the surface integral of face-constant fluxes (nf, nc), in
-    face order, weighted per node by w (n_dofs,)."""
+    face order, weighted per node by w = (step, inv_M) as in `_integrate`."""
     for f in range(len(measure)):
         _integrate(T, f, scale * measure[f], flux[f], w, R)
