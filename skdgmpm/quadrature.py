@@ -137,7 +137,11 @@ class ParticleMap:
         return U_n, Q_n
 
     def interpolate(self, nodal):
-        return self.S @ nodal
+        """S nodal for nodal values (n_dofs, nc): one compiled pass, each row summed in CSR order
+        as scipy's product does."""
+        out = np.empty((self.S.shape[0], nodal.shape[1]))
+        _interpolate(self.S.indptr, self.S.indices, self.S.data, nodal, out)
+        return out
 
 
 @njit(cache=True)
@@ -168,3 +172,25 @@ def _project_state_nc(indptr, indices, data, U, Q, rho, dd, U_n, Q_n, nc):
             Q_n[r, c] = q[c]
         for c in range(dd, nc):
             Q_n[r, c] = u[c] / rho[r]
+
+
+@njit(cache=True)
+def _interpolate(indptr, indices, data, nodal, out):
+    if nodal.shape[1] == 6:             # 2D states: a literal width, the loops unrolled
+        _interpolate_nc(indptr, indices, data, nodal, out, 6)
+    else:
+        _interpolate_nc(indptr, indices, data, nodal, out, nodal.shape[1])
+
+
+@njit(cache=True, inline="always")
+def _interpolate_nc(indptr, indices, data, nodal, out, nc):
+    u = scratch((nc,))                  # the row's sums, in registers
+    for r in range(len(indptr) - 1):
+        for c in range(nc):
+            u[c] = 0.0
+        for k in range(indptr[r], indptr[r + 1]):
+            n, w = indices[k], data[k]
+            for c in range(nc):
+                u[c] += w * nodal[n, c]
+        for c in range(nc):
+            out[r, c] = u[c]
