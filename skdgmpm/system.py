@@ -110,22 +110,26 @@ def normal_flux(traction, velocity, N):
 
 
 @njit(cache=True)
-def _volume_flux(Q, indptr, indices, data, alphas, d, R):
+def _volume_flux(Q, indptr, indices, data, alphas, d, add, R):
     """R += sum_j K^alpha_j F_alpha_j(Q) for CSR matrices K^alpha_j sharing one pattern (data: a
     tuple of their data arrays, alphas: their alpha): F-rows (i, alpha) get -K^alpha v_i, p-rows
     -K^alpha P_i,alpha, each row's products summed in CSR order as scipy's product does and
-    subtracted in the order of the matrices."""
+    subtracted in the order of the matrices; R = ... (each row zeroed as it is reached) unless
+    ``add``."""
     if d == 2:                          # a literal d: the loops unrolled
-        _volume_flux_d(Q, indptr, indices, data, alphas, R, 2)
+        _volume_flux_d(Q, indptr, indices, data, alphas, add, R, 2)
     else:
-        _volume_flux_d(Q, indptr, indices, data, alphas, R, d)
+        _volume_flux_d(Q, indptr, indices, data, alphas, add, R, d)
 
 
 @njit(cache=True, inline="always")
-def _volume_flux_d(Q, indptr, indices, data, alphas, R, d):
+def _volume_flux_d(Q, indptr, indices, data, alphas, add, R, d):
     dd, m = d * d, len(data)
     sv, sP = scratch((m, d)), scratch((m, d))
     for r in range(len(indptr) - 1):
+        if not add:
+            for c in range(dd + d):
+                R[r, c] = 0.0
         for j in range(m):
             for i in range(d):
                 sv[j, i], sP[j, i] = 0.0, 0.0
@@ -146,12 +150,13 @@ def volume_flux(Q, stiffness, out=None):
     """sum_alpha K^alpha F_alpha(Q) for nodal Q (n_dofs, d*d + d) [R18 eq 19] (CSR stiffness
     matrices), added to ``out`` if given; one compiled pass over the rows for matrices that
     share their pattern arrays (`quadrature.common_pattern`), one per matrix otherwise."""
-    R = np.zeros_like(Q) if out is None else out
+    R = np.empty_like(Q) if out is None else out
     d = len(stiffness)
     K0 = stiffness[0]
     if all(K.indptr is K0.indptr and K.indices is K0.indices for K in stiffness):
-        _volume_flux(Q, K0.indptr, K0.indices, tuple(K.data for K in stiffness), tuple(range(d)), d, R)
+        _volume_flux(Q, K0.indptr, K0.indices, tuple(K.data for K in stiffness), tuple(range(d)), d,
+                     out is not None, R)
     else:
         for alpha, K in enumerate(stiffness):
-            _volume_flux(Q, K.indptr, K.indices, (K.data,), (alpha,), d, R)
+            _volume_flux(Q, K.indptr, K.indices, (K.data,), (alpha,), d, out is not None or alpha > 0, R)
     return R
