@@ -76,13 +76,13 @@ class Health:
 def _assess(U, Q, material, laws, params, rho, N, n_axes, finite, J, lowest, speed):
     """Per point p: finite = all of U and Q finite; J = det F (1 where not finite); the
     eigenvalues of the symmetrised acoustic tensors of the tangent at F (I where not finite) along
-    the directions N (n_dir, d): the smallest over all of them into ``lowest`` (nan where not
+    the directions N (a tuple of n_dir d-tuples): the smallest over all of them into ``lowest`` (nan where not
     finite), the fastest wave sqrt(largest / rho) over the first ``n_axes`` into ``speed``. One
     pass: the law's point tangent (`materials.points`), closed forms for d <= 2."""
-    if N.shape[1] == 2:                 # a literal d: the (d, d) loops unrolled
+    if len(N[0]) == 2:                  # a literal d: the (d, d) loops unrolled
         _assess_d(U, Q, material, laws, params, rho, N, n_axes, finite, J, lowest, speed, 2)
     else:
-        _assess_d(U, Q, material, laws, params, rho, N, n_axes, finite, J, lowest, speed, N.shape[1])
+        _assess_d(U, Q, material, laws, params, rho, N, n_axes, finite, J, lowest, speed, len(N[0]))
 
 
 @njit(cache=True, inline="always")
@@ -106,11 +106,11 @@ def _assess_d(U, Q, material, laws, params, rho, N, n_axes, finite, J, lowest, s
         m = material[p]
         tangent_point(laws[m], params[m], F, C, d)
         lo, hi = np.inf, -np.inf
-        for k in range(N.shape[0]):
+        for k in range(len(N)):
             if d == 1:
-                small = large = C[0, 0, 0, 0] * (N[k, 0] * N[k, 0])
+                small = large = C[0, 0, 0, 0] * (N[k][0] * N[k][0])
             elif d == 2:                # in scalars: no (d, d) scratch round trip
-                n0, n1 = N[k, 0], N[k, 1]
+                n0, n1 = N[k][0], N[k][d - 1]       # N[k][1] (typed for every d: d - 1)
                 a00, a11 = _acoustic2(C, 0, 0, n0, n1), _acoustic2(C, 1, 1, n0, n1)
                 mean = 0.5 * (a00 + a11)
                 x, y = 0.5 * (a00 - a11), 0.5 * (_acoustic2(C, 0, 1, n0, n1) + _acoustic2(C, 1, 0, n0, n1))
@@ -134,6 +134,7 @@ def assess(materials, points, U, Q):
     laws, params = materials.laws                                        # built once per set
     rho = np.array([m.rho for m in materials.materials])
     finite, J, lowest, speed = np.empty(n, dtype=np.bool_), np.empty(n), np.empty(n), np.empty(n)
-    _assess(U, Q, np.asarray(points.material, dtype=np.int64), laws, params, rho, directions(d), d,
+    N = tuple(tuple(float(x) for x in n) for n in directions(d))       # a literal count: unrolled
+    _assess(U, Q, np.asarray(points.material, dtype=np.int64), laws, params, rho, N, d,
             finite, J, lowest, speed)
     return Health(finite, np.where(finite, J, 1.0), lowest, speed)
