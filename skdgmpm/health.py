@@ -90,7 +90,7 @@ def _assess_d(U, Q, material, laws, params, rho, N, n_axes, finite, J, lowest, s
     F, C, A = scratch((3, 3)), scratch((d, d, d, d)), scratch((d, d))
     for p in range(len(U)):
         ok = True
-        for k in range(U.shape[1]):
+        for k in range(d * d + d):        # U.shape[1], a literal count
             ok = ok and np.isfinite(U[p, k]) and np.isfinite(Q[p, k])
         finite[p] = ok
         for i in range(3):              # embedded F, I where not finite
