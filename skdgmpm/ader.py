@@ -219,7 +219,7 @@ class ADERDGFEM(DGFEM):
         self.face_material = tuple(self.cell_material[c] for c in (f.cell_L, f.cell_R, b.cell_L))
         self.face_rho = tuple(self.rho_cell[c] for c in (f.cell_L, f.cell_R, b.cell_L))
         self.laws = law_table(self.materials.materials)          # the compiled point laws
-        self.K = tuple((D.T @ gauss).tocsr() for D in self.D)
+        self.K = system.Stiffness(tuple((D.T @ gauss).tocsr() for D in self.D))
 
     # ---------------------------------------------------------------- predictor
     def _law(self, U):

@@ -72,6 +72,7 @@ class DGMPM(GodunovScheme):
         self.d = g.dim
         basis, slot = particle_basis(g, p)
         self.ops = VolumeOperators.assemble(basis)
+        self.stiffness = system.Stiffness(self.ops.stiffness)
         self.map = ParticleMap.build(interpolation_matrix(basis, slot), p.volume, p.rho0, self.ops.lumped)
         self.n_dofs = basis.N
         self.dof_cell = np.empty(basis.N, dtype=np.int64)
@@ -136,7 +137,7 @@ class DGMPM(GodunovScheme):
 
     def volume_flux(self, grid_state, out=None):
         """(c) sum_alpha K^alpha F_alpha(Q) (added to ``out`` if given)."""
-        return system.volume_flux(grid_state.Q, self.ops.stiffness, out)
+        return system.volume_flux(grid_state.Q, self.stiffness, out)
 
     def interface_flux(self, grid_state):
         """(e) Godunov fluxes at interior faces from the linearised Riemann solver with (CTU) the

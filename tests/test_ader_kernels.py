@@ -21,7 +21,7 @@ def test_interior_pass_is_the_time_weighted_godunov_flux(case):
     st = build(load_scene(scene, options)).stepper
     d, n_t, nc = st.d, len(st.tau), st.d * st.d + st.d
     rng = np.random.default_rng(1)
-    n_points = st.K[0].shape[1]                        # the predictor's points
+    n_points = st.K.shape[1]                           # the predictor's points
     u_hat = np.zeros((n_t, n_points, nc))
     u_hat[..., : d * d] = np.eye(d).ravel() + 0.02 * rng.standard_normal((n_t, n_points, d * d))
     q_hat = rng.standard_normal((n_t, n_points, nc)) * np.r_[1e8 * np.ones(d * d), np.ones(d)]
