@@ -10,17 +10,24 @@ from .base import Material, _check_parameter, _inverse_transpose, admissible_inv
 
 
 @njit(cache=True, inline="always")
-def stress_point(F, prm, P, d):
-    """d-block P (d, d) of `Gavrilyuk.first_piola` at one embedded F (3, 3) (the values at F = I
-    where J <= 0); prm = (kappa, w1, w2)."""
-    kappa, w1, w2 = prm[0], prm[1], prm[2]
+def _kinematics(F):
+    """(ok, J, F^-T as a row-major 9-tuple, I1 = tr(F^T F), J^(-2/3)) at one embedded F (3, 3),
+    those of F = I where J <= 0 (ok False), as `admissible_inverse`."""
     ok, J, G = _inverse_transpose(F)
     I1 = 0.0
     for i in range(3):
         for a in range(3):
             f = F[i, a] if ok else (1.0 if i == a else 0.0)
             I1 += f * f
-    s = J ** (-2 / 3)
+    return ok, J, G, I1, J ** (-2 / 3)
+
+
+@njit(cache=True, inline="always")
+def stress_point(F, prm, P, d):
+    """d-block P (d, d) of `Gavrilyuk.first_piola` at one embedded F (3, 3) (the values at F = I
+    where J <= 0); prm = (kappa, w1, w2)."""
+    kappa, w1, w2 = prm[0], prm[1], prm[2]
+    ok, J, G, I1, s = _kinematics(F)
     c_vol, c_iso = kappa * (J - 1.0) * J, w1 + 2 * w2 * (s * I1)
     for i in range(d):
         for a in range(d):
@@ -33,13 +40,7 @@ def tangent_point(F, prm, C, d):
     """The d-block C (d, d, d, d) of the tangent at one embedded F (3, 3) (I where J <= 0, as
     `admissible_inverse`); prm = (kappa, w1, w2). See `Gavrilyuk` for the formula."""
     kappa, w1, w2 = prm[0], prm[1], prm[2]
-    ok, J, G = _inverse_transpose(F)
-    I1 = 0.0
-    for i in range(3):
-        for a in range(3):
-            f = F[i, a] if ok else (1.0 if i == a else 0.0)
-            I1 += f * f
-    s = J ** (-2 / 3)
+    ok, J, G, I1, s = _kinematics(F)
     I1b = s * I1
     c_vol, c_vol_x = kappa * ((2 * J - 1) * J), kappa * ((J - 1) * J)
     c_iso = w1 + 2 * w2 * I1b

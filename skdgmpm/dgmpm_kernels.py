@@ -15,14 +15,13 @@ Face-set arrays as in `skdgmpm.faces` ((nf, d) normals, (nf,) measures); a trace
 (h (nf,), normals (2, nf, 2), interior edge (2, nf), boundary edge (2, nf), sign (2, nf)) as built
 by `DGMPM._setup_transverse` (empty arrays for DCU).
 """
-import numpy as np
 from numba import njit
 
 from skdgmpm.materials.points import tangent_point
 
 from .faces import gather_row
-from .system import scratch
 from .riemann import _acoustic, _acoustic2, _godunov_flux2, _godunov_sides, _sqrt_spd, _sqrt_spd2, _stress_rate
+from .system import scratch
 
 
 # ---------------------------------------------------------------- point pieces (one face side)
@@ -232,11 +231,10 @@ def _boundary_sides_d(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v
 def boundary_pass(N, t_L, v_L, t_s, v_s, C, rho_f, dt, ctu, topo, T_L, T_R, measure, flux, weight, R, corr_bnd):
     """Flux F_N(t*, v*) of every boundary face added to flux (nf, nc) (zero on entry) and, with
     ``ctu``, the transverse corrections of the fluctuation F_N(t*, v*) - F_N(t_L, v_L) entering
-    the cell: an interior edge's integrated at once into R, weighted per node by ``weight``
-    ((step, inv_M) as in `_integrate`)
-    (through the interior traces T_L, T_R and face measures: few faces), a boundary edge's added
-    to corr_bnd. Returns the first face
-    whose acoustic tensor along an edge is not positive definite, or -1."""
+    the cell: an interior edge's integrated at once into R (through the interior traces T_L, T_R
+    and face measures: few faces), weighted per node by ``weight`` ((step, inv_M) as in
+    `_integrate`), a boundary edge's added to corr_bnd. Returns the first face whose acoustic
+    tensor along an edge is not positive definite, or -1."""
     d = N.shape[1]
     for f in range(len(N)):
         _face_flux(t_s[f], v_s[f], N[f], flux[f], d)

@@ -119,11 +119,12 @@ class SlopeLimiter:
             if T.shape[0] == 0:
                 continue
             excursion = T @ dofs - mean[cell]
-            linear = self._limited_excursion(grad, cell, X, excursion)
+            scaled = self._limited_excursion(grad, cell, X, excursion)
             for k, (b, scale) in enumerate(zip(self.blocks, scales)):
                 size, bound = _projected_bound(excursion[:, b], diffs[cell][:, :, b], scale)
                 np.logical_or.at(troubled, cell, size > bound + 1e-12 * scale)
-                size, bound = _projected_bound(linear[:, b], diffs[cell][:, :, b], scale)
+                if scaled is not excursion:             # eq 41: the reconstruction's own bound
+                    size, bound = _projected_bound(scaled[:, b], diffs[cell][:, :, b], scale)
                 moved = size > 1e-14 * scale
                 ratio = np.clip(bound / np.where(moved, size, 1.0), 0.0, 1e6)
                 np.minimum.at(alpha[:, k], cell, np.where(moved, _g(ratio, self.kind), 1.0))
@@ -176,10 +177,10 @@ class SlopeLimiter:
             bound = np.where(excursion > 0, hi[cell] - mean[cell], lo[cell] - mean[cell])
             out = np.abs(excursion) > np.abs(bound) + 1e-12 * scale
             np.logical_or.at(troubled, cell, out.any(axis=1))
-            linear = self._limited_excursion(grad, cell, X, excursion)     # what alpha scales
-            bound = np.where(linear > 0, hi[cell] - mean[cell], lo[cell] - mean[cell])
-            moved = np.abs(linear) > 1e-14 * scale
-            ratio = np.clip(bound / np.where(moved, linear, 1.0), 0.0, 1e6)    # g(1e6) ~ 1
+            scaled = self._limited_excursion(grad, cell, X, excursion)     # what alpha scales
+            bound = np.where(scaled > 0, hi[cell] - mean[cell], lo[cell] - mean[cell])
+            moved = np.abs(scaled) > 1e-14 * scale
+            ratio = np.clip(bound / np.where(moved, scaled, 1.0), 0.0, 1e6)    # g(1e6) ~ 1
             np.minimum.at(alpha, cell, np.where(moved, _g(ratio, self.kind), 1.0))
         return self._replace(dofs, mean, grad, alpha, troubled)
 
