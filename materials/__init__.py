@@ -21,6 +21,8 @@ LAWS = {
     "gavrilyuk": Gavrilyuk,
 }
 _ALIASES = {"svk": "saint_venant_kirchhoff"}
+for _name, _cls in LAWS.items():
+    _cls.law_name = _name          # the scene's ``law`` value, for messages
 
 __all__ = ["LAWS", "Gavrilyuk", "LinearElastic", "Material", "NeoHookean", "SaintVenantKirchhoff",
            "make_material"]

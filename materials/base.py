@@ -137,7 +137,8 @@ class Material(ABC):
 
     @abstractmethod
     def energy(self, F):
-        """Stored energy density W(F) per reference volume, shape ``(...,)`` (J/m^3); P = dW/dF."""
+        """Stored energy density W(F) per reference volume, shape ``(...,)`` (J/m^3); P = dW/dF.
+        A law with internal variables takes ``energy(F, history)``: the recoverable (elastic) part."""
 
     def tangent(self, F):
         """Analytic tangent C = dP/dF, shape ``(..., 3, 3, 3, 3)`` (Pa)."""
@@ -154,6 +155,30 @@ class Material(ABC):
     def point_law(self):
         """(law id, parameters) of the compiled point functions in `materials.points`."""
         return self.law_id, np.array(self.law_parameters, dtype=float)
+
+    # -- internal variables (none for a hyperelastic law: zero width, no cost) ----------------
+    history_names = ()
+    """Names of the internal variables, one column each of a point's history array; a law with
+    plastic flow puts the equivalent plastic strain ``"eqp"`` first."""
+
+    @property
+    def n_history(self):
+        """Number of internal variables per point."""
+        return len(self.history_names)
+
+    def initial_history(self, n):
+        """History of ``n`` points in the virgin state, shape ``(n, n_history)``."""
+        return np.zeros((n, self.n_history))
+
+    def stress_update(self, F, history):
+        """(P(F_{n+1}, history_n), history_{n+1}): the return mapping of a law with internal
+        variables; a hyperelastic law returns P(F) and the history unchanged."""
+        return self.first_piola(F), history
+
+    def dissipation(self, history):
+        """Plastic work density done up to the given history, shape ``(...,)`` (J/m^3)."""
+        history = np.asarray(history, dtype=float)
+        return np.zeros(history.shape[:-1])
 
     # -- derived ------------------------------------------------------------------------------
     def acoustic_tensor(self, F, N):
@@ -186,8 +211,11 @@ class Material(ABC):
         omega = np.linalg.eigvalsh(0.5 * (A + np.swapaxes(A, -1, -2)))
         return omega[..., 0] > 0.0
 
-    def cauchy(self, F):
-        """Cauchy stress sigma = P F^T / J, shape ``(..., 3, 3)`` (Pa)."""
+    def cauchy(self, F, history=None):
+        """Cauchy stress sigma = P F^T / J, shape ``(..., 3, 3)`` (Pa), with the internal variables
+        ``history`` of the state (``None``: the virgin state). The history of a state is already
+        updated to its F, so re-running the return mapping is elastic and returns the state's P."""
         F = np.asarray(F, dtype=float)
         J = cofactor(F)[1]
-        return self.first_piola(F) @ np.swapaxes(F, -1, -2) / J[..., None, None]
+        P = self.first_piola(F) if history is None else self.stress_update(F, history)[0]
+        return P @ np.swapaxes(F, -1, -2) / J[..., None, None]

@@ -46,6 +46,14 @@ def stress_point(law, prm, F, P, d):
         gavrilyuk.stress_point(F, prm, P, d)
 
 
+@njit(cache=True, inline="always")
+def stress_update_point(law, prm, F, h_n, h, P, d):
+    """d-block P (d, d) of the first Piola stress at one embedded F (3, 3) at t_{n+1} from the
+    internal variables h_n (n_history,) of t_n, and their update h: the return mapping of a law
+    with history; a hyperelastic law ignores h_n and h (zero width)."""
+    stress_point(law, prm, F, P, d)
+
+
 def law_table(materials):
     """(law ids (n_mat,), parameters (n_mat, N_PARAMETERS)) of a sequence of materials."""
     for m in materials:             # a new law must be added to the dispatch, never fall into another's
@@ -53,7 +61,7 @@ def law_table(materials):
             raise TypeError(f"{type(m).__name__}: no compiled point law (law_id {getattr(m, 'law_id', None)!r} "
                             f"is not one of {KNOWN}; add it to materials/points.py)")
     laws = np.array([m.law_id for m in materials], dtype=np.int64)
-    params = np.zeros((len(materials), N_PARAMETERS))
+    params = np.zeros((len(materials), max([N_PARAMETERS] + [len(m.law_parameters) for m in materials])))
     for k, m in enumerate(materials):
         params[k, : len(m.law_parameters)] = m.law_parameters
     return laws, params

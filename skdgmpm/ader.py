@@ -229,13 +229,15 @@ class ADERDGFEM(DGFEM):
     def _law_at(self, U, cells, rho):
         """The law on (..., n, nc) values at n points of the given cells and densities (n,): one
         evaluation over every batch entry, with the cells' materials and the densities repeated
-        once per entry (cached: the batches are 1 or P+1 time nodes)."""
+        once per entry (cached: the batches are 1 or P+1 time nodes), and the internal variables
+        of t_n at the points (`history_n`), never committed here [L23 §4.5]."""
         nc = U.shape[-1]
         n_rep = U.size // (len(cells) * nc)
         key = (id(cells), n_rep)
         if key not in self._repeated:
             self._repeated[key] = np.tile(self.cell_material[cells], n_rep), np.tile(rho, n_rep)
-        return self.materials.state(U.reshape(-1, nc), *self._repeated[key]).reshape(U.shape)
+        history = None if not self.materials.n_history else np.tile(self.history_n, (n_rep, 1))
+        return self.materials.state(U.reshape(-1, nc), *self._repeated[key], history).reshape(U.shape)
 
     def space_time_source(self, points, time, dt):
         """Source values at ``points`` and the time nodes t_n + tau_s dt: (P+1, n, nc), or None
@@ -332,6 +334,8 @@ class ADERDGFEM(DGFEM):
         return self.corrector(U, u_hat, q_hat, time, dt, S)
 
     def step(self, state, dt_max=np.inf):
+        self.history_n = state.history          # the predictor's law reads the history of t_n
+
         def attempt(dt):            # the state's Q is the law at the Gauss points at t_n
             dofs, work = self.advance(state.dofs, state.t, dt, state.Q)
             return self.evaluate_points(state, dofs, dt), work

@@ -136,6 +136,10 @@ class ADERDGMPM(ADERDGFEM):
     # ---------------------------------------------------------------- corrector and back-map
     def step(self, state, dt_max=np.inf):
         U_slots, Q_slots = self._padded(state.U), self._padded(state.Q)       # Q: the law at t_n
+        if self.materials.n_history:            # the particles' history of t_n on the padded slots
+            virgin = self.materials.initial_history(self.slot_cell * 0)       # padding: a virgin state
+            virgin[self.slot] = state.history
+            self.history_n = virgin
         dofs_n = self.project(self.E_gauss @ U_slots.reshape(-1, U_slots.shape[-1]))  # grid image of the MLS field
 
         def attempt(dt):

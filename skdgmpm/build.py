@@ -171,7 +171,13 @@ def build(scene):
     if name == "dgmpm":
         if method.get("order", 1) != 1:
             raise InputError(f"{scene.where('method.order')} = {method['order']!r}: dgmpm is first order")
-        stepper = DGMPM(grid, particles, mats, bcs, cfl=cfl, integrator=method.get("integrator", "euler"),
+        integrator = method.get("integrator", "euler")
+        if integrator == "rk2" and mats.n_history:
+            laws = ", ".join(sorted({repr(m.law_name) for m in materials if m.n_history}))
+            raise InputError(f"{scene.where('method.integrator')} = 'rk2' with material law {laws}: a law with "
+                             "internal variables needs integrator = 'euler' in dgmpm (RK2 would evaluate it at "
+                             "the grid nodes, where its history does not live)")
+        stepper = DGMPM(grid, particles, mats, bcs, cfl=cfl, integrator=integrator,
                         transverse=method.get("transverse", "dcu"))
     elif name == "mpm":              # the whole background grid; integrator/transverse keys are ignored
         stepper = MPM(grid, particles, mats, bcs, cfl=cfl, update=method.get("update", "usl"),

@@ -5,22 +5,22 @@ from functools import cached_property
 import numpy as np
 from numba import njit
 
-from skdgmpm.materials.points import law_table, stress_point
+from skdgmpm.materials.points import law_table, stress_update_point
 
 from .system import embed, scratch
 
 
 @njit(cache=True)
-def _states(laws, params, index, U, rho, Q):
+def _states(laws, params, index, U, rho, h_n, h, Q):
     d = 2 if U.shape[1] == 6 else (1 if U.shape[1] == 2 else 3)
     if d == 2:                          # a literal d: the loops unrolled
-        _states_d(laws, params, index, U, rho, Q, 2)
+        _states_d(laws, params, index, U, rho, h_n, h, Q, 2)
     else:
-        _states_d(laws, params, index, U, rho, Q, d)
+        _states_d(laws, params, index, U, rho, h_n, h, Q, d)
 
 
 @njit(cache=True, inline="always")
-def _states_d(laws, params, index, U, rho, Q, d):
+def _states_d(laws, params, index, U, rho, h_n, h, Q, d):
     dd = d * d
     F, P = scratch((3, 3)), scratch((d, d))
     for k in range(len(U)):
@@ -28,7 +28,7 @@ def _states_d(laws, params, index, U, rho, Q, d):
             for a in range(3):
                 F[i, a] = U[k, i * d + a] if i < d and a < d else (1.0 if i == a else 0.0)
         m = index[k]
-        stress_point(laws[m], params[m], F, P, d)
+        stress_update_point(laws[m], params[m], F, h_n[k], h[k], P, d)
         for i in range(d):
             for a in range(d):
                 Q[k, i * d + a] = P[i, a]
@@ -57,37 +57,93 @@ class MaterialSet:
         """The compiled point laws' table (`skdgmpm.materials.points.law_table`)."""
         return law_table(self.materials)
 
-    def state(self, U, index, rho):
-        """Q = [P(F), p / rho0] from states U = [F, p] (n, d*d + d) and densities rho (n,): one
-        compiled pass over the points (no embedded copies, masks or per-law batches)."""
-        Q = np.empty(U.shape)
-        _states(*self.laws, np.asarray(index, dtype=np.int64), U, np.asarray(rho, dtype=float), Q)
-        return Q
+    @cached_property
+    def n_history(self):
+        """Width of the points' history array: the most internal variables of any law (0: every
+        law is hyperelastic, and the history costs nothing)."""
+        return max(m.n_history for m in self.materials)
+
+    @cached_property
+    def history_names(self):
+        """Column names of the history array (the widest law's; a law with plastic flow puts
+        ``"eqp"`` first, so that column is the equivalent plastic strain of every such law)."""
+        return max((m.history_names for m in self.materials), key=len)
+
+    def initial_history(self, index):
+        """History of points in the virgin state, (n, n_history), each with its material's."""
+        out = np.zeros((len(index), self.n_history))
+        for k, mat in enumerate(self.materials):
+            sel = index == k
+            out[sel, : mat.n_history] = mat.initial_history(int(sel.sum()))
+        return out
+
+    def field(self, name, history):
+        """The history column ``name`` of the points (n,), or None if no law has it."""
+        return history[:, self.history_names.index(name)] if name in self.history_names else None
+
+    def update(self, U, index, rho, history):
+        """(Q, history_{n+1}): Q = [P(F, history_n), p / rho0] from states U = [F, p] (n, d*d + d),
+        densities rho (n,) and the internal variables of t_n (n, n_history), with their update;
+        one compiled pass over the points (no embedded copies, masks or per-law batches)."""
+        if history is None:
+            history = self.initial_history(np.asarray(index)) if self.n_history else np.empty((len(U), 0))
+        Q, h = np.empty(U.shape), np.empty_like(history)
+        _states(*self.laws, np.asarray(index, dtype=np.int64), U, np.asarray(rho, dtype=float),
+                history, h, Q)
+        return Q, h
+
+    def state(self, U, index, rho, history=None):
+        """Q = [P(F), p / rho0] from states U = [F, p] (n, d*d + d) and densities rho (n,), with
+        the internal variables ``history`` (n, n_history) of t_n (None: none, or the virgin
+        state), which stay as they are."""
+        return self.update(U, index, rho, history)[0]
 
     def stress(self, F, index):
-        """First Piola-Kirchhoff P(F): (n, d, d) -> (n, d, d)."""
+        """First Piola-Kirchhoff P(F): (n, d, d) -> (n, d, d) (a law with internal variables: in
+        its virgin state)."""
         d = F.shape[1]
         return self._apply("first_piola", F, index, (d, d), d)
 
+    def stress_update(self, F, index, history):
+        """(P, history_{n+1}) at F (n, d, d) from the internal variables of t_n (n, n_history)."""
+        if not self.n_history:
+            return self.stress(F, index), history
+        n, d = len(F), F.shape[1]
+        U = np.concatenate([F.reshape(n, d * d), np.zeros((n, d))], axis=1)
+        Q, history = self.update(U, index, np.ones(n), history)
+        return Q[:, : d * d].reshape(n, d, d), history
+
     def tangent(self, F, index):
-        """C = dP/dF restricted to the d-dimensional system: (n, d, d, d, d)."""
+        """C = dP/dF restricted to the d-dimensional system: (n, d, d, d, d); for a law with
+        internal variables, the tangent its Riemann solver uses (`tangent_point`)."""
         d = F.shape[1]
         return self._apply("tangent_block", F, index, (d, d, d, d), d, d)
 
-    def energy(self, F, index):
-        """Stored energy density per reference volume (n,)."""
+    def energy(self, F, index, history=None):
+        """Stored (recoverable) energy density per reference volume (n,)."""
         F3 = embed(F)
         out = np.empty(len(F))
         for k, mat in enumerate(self.materials):
             sel = index == k
-            out[sel] = mat.energy(F3[sel])
+            out[sel] = mat.energy(F3[sel], history[sel, : mat.n_history]) if mat.n_history else mat.energy(F3[sel])
         return out
 
-    def cauchy(self, F, index):
+    def dissipation(self, index, history):
+        """Plastic work density done up to ``history`` (n,) (zero for hyperelastic laws)."""
+        out = np.zeros(len(index))
+        for k, mat in enumerate(self.materials):
+            sel = index == k
+            if mat.n_history:
+                out[sel] = mat.dissipation(history[sel, : mat.n_history])
+        return out
+
+    def cauchy(self, F, index, history=None):
         """Cauchy stress sigma = P F^T / J of the embedded 3x3 state: (n, 3, 3)."""
         F3 = embed(F)
         out = np.empty((len(F), 3, 3))
         for k, mat in enumerate(self.materials):
             sel = index == k
-            out[sel] = mat.cauchy(F3[sel])
+            out[sel] = (mat.cauchy(F3[sel], history[sel, : mat.n_history]) if mat.n_history and history is not None
+                        else mat.cauchy(F3[sel]))
         return out
+

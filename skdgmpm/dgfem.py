@@ -177,21 +177,30 @@ class DGFEM(GodunovScheme):
         """L2 projection of point values onto the DG space (Gauss weights)."""
         return self.apply_mass_inverse(self.B.T @ (self.gauss.volume[:, None] * U_points))
 
-    def point_state(self, U, cells, rho):
-        """Q from U pointwise: P = P(F) with each cell's law, v = p / rho0."""
-        return self.materials.state(U, self.cell_material[cells], rho)
+    def point_state(self, U, cells, rho, history=None):
+        """Q from U pointwise: P = P(F, history) with each cell's law, v = p / rho0."""
+        return self.materials.state(U, self.cell_material[cells], rho, history)
+
+    def gauss_state(self, U_dofs):
+        """Q at the Gauss points from the dofs, with the internal variables of t_n there."""
+        return self.point_state(self.B @ U_dofs, self.gauss.cell, self.gauss.rho0, self.history_n)
+
+    history_n = None          # (n_gauss, n_history) internal variables of the step's t_n
 
     def face_values(self, T, grid_state, cells):
-        """Traces of U, and Q from the law at the facet points."""
+        """Traces of U, and Q: from the law at the facet points, or, for a law with internal
+        variables (they live at the Gauss points only), the trace of Q interpolated from the
+        Gauss points (``grid_state.Q``, dofs)."""
         d = self.d
         U = T @ grid_state.U
         rho = self.rho_cell[cells]          # not a trace: ElementQuadP's basis is no partition of unity
-        return self.point_state(U, cells, rho), U[:, : d * d].reshape(-1, d, d), rho
+        Q = self.point_state(U, cells, rho) if grid_state.Q is None else T @ grid_state.Q
+        return Q, U[:, : d * d].reshape(-1, d, d), rho
 
     # ---------------------------------------------------------------- stages
     def volume_flux(self, U_dofs):
         """sum_q w_q dPhi/dX_alpha F_alpha(Q(X_q)), the law evaluated at the Gauss points."""
-        return self.volume_flux_points(self.point_state(self.B @ U_dofs, self.gauss.cell, self.gauss.rho0))
+        return self.volume_flux_points(self.gauss_state(U_dofs))
 
     def volume_flux_points(self, Q):
         """The volume term from Q at the Gauss points (n_points, ncomp)."""
@@ -209,8 +218,13 @@ class DGFEM(GodunovScheme):
 
     def rate(self, U_dofs, time, dt):
         """dU/dt = M^-1 (volume + surface terms + source) and the boundary power."""
-        R, power = self.surface_residual(GridState(U_dofs, None), time, dt)
-        R += self.volume_flux(U_dofs)
+        if self.materials.n_history:     # the law at the Gauss points only, where the history is
+            Q = self.gauss_state(U_dofs)
+            R, power = self.surface_residual(GridState(U_dofs, self.project(Q)), time, dt)
+            R += self.volume_flux_points(Q)
+        else:
+            R, power = self.surface_residual(GridState(U_dofs, None), time, dt)
+            R += self.volume_flux(U_dofs)
         if self.body_force is not None:
             R += self.source_integral(self.source(self.gauss, time))
         return self.apply_mass_inverse(R), power
@@ -236,10 +250,10 @@ class DGFEM(GodunovScheme):
     def evaluate_points(self, state, dofs, dt):
         """State at the Gauss points from the dofs; positions advanced with the new velocity."""
         U = self.B @ dofs
-        Q = self.point_state(U, self.gauss.cell, self.gauss.rho0)
+        Q, history = self.materials.update(U, self.cell_material[self.gauss.cell], self.gauss.rho0, state.history)
         v = Q[:, self.d * self.d:]
         new = ParticleState(state.t + dt, U, Q, advance_positions(state, v, dt, self.d), state.step + 1,
-                            dofs=dofs)
+                            dofs=dofs, history=history)
         self.check(new)
         return new
 
@@ -248,12 +262,15 @@ class DGFEM(GodunovScheme):
         """From F (n, d, d) and v (n, d) at the Gauss points: L2 projection onto the DG space."""
         U = system.join(F, self.gauss.rho0[:, None] * v)
         dofs = self.project(U)
-        state = ParticleState(t, self.B @ dofs, None, self.particles.X.copy(), dofs=dofs)
-        state.Q = self.point_state(state.U, self.gauss.cell, self.gauss.rho0)
+        history = self.materials.initial_history(self.cell_material[self.gauss.cell])
+        state = ParticleState(t, self.B @ dofs, None, self.particles.X.copy(), dofs=dofs, history=history)
+        state.Q = self.point_state(state.U, self.gauss.cell, self.gauss.rho0, history)
         self.check(state)
         return state
 
     def step(self, state, dt_max=np.inf):
+        self.history_n = state.history          # every stage's law reads the history of t_n
+
         def attempt(dt):
             dofs, work = self.advance(state.dofs, state.t, dt)
             return self.evaluate_points(state, dofs, dt), work

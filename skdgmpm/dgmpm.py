@@ -68,6 +68,12 @@ class DGMPM(GodunovScheme):
             raise InputError(f"method.integrator = {self.integrator!r}: expected 'euler' or 'rk2'")
         if self.transverse not in ("dcu", "ctu"):
             raise InputError(f"method.transverse = {self.transverse!r}: expected 'dcu' or 'ctu'")
+        if self.integrator == "rk2" and self.materials.n_history:
+            # RK2's second stage needs the law at the grid nodes, where no history exists [L23 §1]
+            laws = ", ".join(sorted({m.law_name for m in self.materials.materials if m.n_history}))
+            raise InputError(f"method.integrator = 'rk2' with material law {laws}: a law with internal "
+                             "variables needs integrator = 'euler' in DGMPM (RK2 would evaluate it at the "
+                             "grid nodes, where the history does not live)")
         g, p = self.grid, self.particles
         self.d = g.dim
         basis, slot = particle_basis(g, p)

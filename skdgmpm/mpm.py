@@ -62,6 +62,7 @@ class StepData:
     P: np.ndarray                  # (n, d, d)
     v: np.ndarray                  # (n, d) particle velocities
     x: np.ndarray                  # (n, d) current positions
+    history: np.ndarray            # (n, n_history) the laws' internal variables, updated with the stress
     shape: object = None           # ShapeFunctions
     mass: np.ndarray = None        # (n_nodes,)
     filled: np.ndarray = None      # (n_nodes,) bool, nodes with mass
@@ -230,10 +231,11 @@ class MPM(GodunovScheme):
             s.v_grid[nodes, comp] = value * schedule(t)
 
     def strain_stress(self, s):
-        """L_p = sum_i v_i (x) grad S_ip, F <- (I + dt L) F, P = P(F)."""
+        """L_p = sum_i v_i (x) grad S_ip, F <- (I + dt L) F, P = P(F, history) with the history
+        of t_n (the particles' internal variables: once per step in every variant)."""
         L = np.stack([G @ s.v_grid for G in s.shape.grad], axis=2)          # (n, d, d)
         s.F = s.F + s.dt * L @ s.F
-        s.P = self.materials.stress(s.F, self.particles.material)
+        s.P, s.history = self.materials.stress_update(s.F, self.particles.material, s.history)
 
     def grid_forces(self, s):
         """f_int,i = -sum_p sigma_p grad S_ip V_p (sigma V = P F^T V0), plus sum_p S_ip f_p of the
@@ -292,11 +294,11 @@ class MPM(GodunovScheme):
         # dt from the state at the start of the step (no retry as in the Godunov schemes: with
         # |v| in the bound nearly every step would be taken twice)
         s = StepData(state.t, self.time_step(state, dt_max), state.step, F.copy(), P.copy(), v.copy(),
-                     state.x.copy())
+                     state.x.copy(), state.history)
         for stage in self.variant.stages:
             getattr(self, stage)(s)
         new = ParticleState(state.t + s.dt, system.join(s.F, self.particles.rho0[:, None] * s.v),
-                            system.join(s.P, s.v), s.x, state.step + 1)
+                            system.join(s.P, s.v), s.x, state.step + 1, history=s.history)
         self.check(new)
         self.external_work += s.work
         return new

@@ -11,12 +11,13 @@ from . import system
 
 
 def particle_fields(stepper, state):
-    """Named particle arrays at a state: F_ij, P_ij, v_i, sigma_ij (Cauchy, 3x3), x_i."""
+    """Named particle arrays at a state: F_ij, P_ij, v_i, sigma_ij (Cauchy, 3x3), x_i and the
+    laws' internal variables by name (``eqp``, the equivalent plastic strain, ...)."""
     d = stepper.d
     F, p = system.split(state.U, d)
     P, v = system.split(state.Q, d)
-    sigma = stepper.materials.cauchy(F, stepper.particles.material)
-    out = {}
+    sigma = stepper.materials.cauchy(F, stepper.particles.material, state.history)
+    out = _history_fields(stepper.materials, state.history)
     for i in range(d):
         out[f"v{i + 1}"] = v[:, i]
         out[f"x{i + 1}"] = state.x[:, i]
@@ -28,6 +29,13 @@ def particle_fields(stepper, state):
         for j in range(i, 3):
             out[f"sigma{i + 1}{j + 1}"] = sigma[:, i, j]
     return out
+
+
+def _history_fields(materials, history):
+    """{name: (n,)} of the history columns (none for hyperelastic laws)."""
+    if history is None or not materials.n_history:
+        return {}
+    return {name: history[:, k] for k, name in enumerate(materials.history_names)}
 
 
 def _pad3(a):
@@ -51,12 +59,13 @@ def write_particles(path, stepper, state):
     d = stepper.d
     F, p = system.split(state.U, d)
     P, v = system.split(state.Q, d)
-    sigma = stepper.materials.cauchy(F, stepper.particles.material)
+    sigma = stepper.materials.cauchy(F, stepper.particles.material, state.history)
     n = len(state.x)
     data = {
         "F": system.embed(F).reshape(n, 9), "P": _tensor9(P), "cauchy": sigma.reshape(n, 9),
         "velocity": _pad3(v), "momentum": _pad3(p), "X": _pad3(stepper.particles.X),
         "volume": stepper.particles.volume, "material": stepper.particles.material.astype(float),
+        **_history_fields(stepper.materials, state.history),
     }
     mesh = meshio.Mesh(_pad3(state.x), [("vertex", np.arange(n)[:, None])], point_data=data)
     mesh.write(path)

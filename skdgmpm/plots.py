@@ -21,13 +21,16 @@ def _figure():
 
 
 def energy(result, path=None, ax=None):
-    """Kinetic, stored and total energy, boundary work and the balance against time."""
+    """Kinetic, stored, dissipated (plastic work, where a law has it) and total energy, boundary
+    work and the balance against time."""
     plt = _figure()
     fig = None
     if ax is None:
         fig, ax = plt.subplots(figsize=(6, 3.5))
     h = result.history
-    for key in ("kinetic", "stored", "total", "external_work", "balance"):
+    for key in ("kinetic", "stored", "dissipated", "total", "external_work", "balance"):
+        if key == "dissipated" and not np.any(h[key]):
+            continue
         ax.plot(h["t"], h[key], label=key.replace("_", " "))
     ax.set_xlabel("t (s)")
     ax.set_ylabel("energy (J)")

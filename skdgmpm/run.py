@@ -190,13 +190,14 @@ def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, partial, p
     if partial is not None:
         output.write_grid(partial / "grid.vtu", disc.grid)
 
-    history = {k: [] for k in ("step", "t", "kinetic", "stored", "total", "external_work", "balance",
-                               "min_J", "min_acoustic")}
+    history = {k: [] for k in ("step", "t", "kinetic", "stored", "dissipated", "total", "external_work",
+                               "balance", "min_J", "min_acoustic")}
 
     def record(st):
-        kin, sto = stepper.energy(st)
-        for k, v in zip(history, (st.step, st.t, kin, sto, kin + sto, stepper.external_work,
-                                  kin + sto - stepper.external_work)):
+        kin, sto, dis = stepper.energy(st)
+        total = kin + sto + dis
+        for k, v in zip(history, (st.step, st.t, kin, sto, dis, total, stepper.external_work,
+                                  total - stepper.external_work)):
             history[k].append(v)
         health = st.health or {}                # run health: set by the stepper's check
         history["min_J"].append(health.get("min_J", np.nan))

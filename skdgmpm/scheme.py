@@ -21,7 +21,8 @@ from .riemann import godunov_fluxes, impedance
 
 @dataclass
 class ParticleState:
-    """What the particles carry at time ``t``: U = [F, p], Q = [P, v], current positions x."""
+    """What the particles carry at time ``t``: U = [F, p], Q = [P, v], current positions x and
+    the internal variables of the laws (n, n_history), zero width for hyperelastic laws."""
 
     t: float
     U: np.ndarray          # (n, d*d + d)
@@ -31,10 +32,12 @@ class ParticleState:
     speed: np.ndarray = None   # (n,) fastest wave speed along the grid axes
     dofs: np.ndarray = None    # (n_dofs, d*d + d) grid unknowns of schemes that keep them (DGFEM)
     health: dict = None        # {"min_J", "min_acoustic"} over the points, set by the check
+    history: np.ndarray = None  # (n, n_history) internal variables, committed once per step
 
     def copy(self):
         return ParticleState(self.t, self.U.copy(), self.Q.copy(), self.x.copy(), self.step, self.speed,
-                             None if self.dofs is None else self.dofs.copy(), self.health)
+                             None if self.dofs is None else self.dofs.copy(), self.health,
+                             None if self.history is None else self.history.copy())
 
 
 @dataclass
@@ -185,19 +188,24 @@ class GodunovScheme:
     speed_factor = 1.0
 
     def constitutive_update(self, state, U, dt):
-        """(h) P_p = P(F_p), v_p = p_p / rho0_p [R18 eq 41-42]; positions by the trapezoidal rule
-        (second order, so displacement errors measure the scheme, not the position update)."""
+        """(h) P_p = P(F_p, history_p), v_p = p_p / rho0_p [R18 eq 41-42], the internal variables
+        updated at the points from those of t_n (committed with the returned state); positions
+        by the trapezoidal rule (second order, so displacement errors measure the scheme, not
+        the position update)."""
         d = self.d
-        Q = self.materials.state(U, self.particles.material, self.particles.rho0)
-        new = ParticleState(state.t + dt, U, Q, advance_positions(state, Q[:, d * d:], dt, d), state.step + 1)
+        Q, history = self.materials.update(U, self.particles.material, self.particles.rho0, state.history)
+        new = ParticleState(state.t + dt, U, Q, advance_positions(state, Q[:, d * d:], dt, d), state.step + 1,
+                            history=history)
         self.check(new)
         return new
 
     def initial_state(self, F, v, t=0.0):
-        """ParticleState from particle F (n, d, d) and v (n, d)."""
-        P = self.materials.stress(F, self.particles.material)
+        """ParticleState from particle F (n, d, d) and v (n, d), the laws' internal variables in
+        their virgin state."""
+        history = self.materials.initial_history(self.particles.material)
+        P, history = self.materials.stress_update(F, self.particles.material, history)
         U = system.join(F, self.particles.rho0[:, None] * v)
-        state = ParticleState(t, U, system.join(P, v), self.particles.X.copy())
+        state = ParticleState(t, U, system.join(P, v), self.particles.X.copy(), history=history)
         self.check(state)
         return state
 
@@ -227,12 +235,15 @@ class GodunovScheme:
             raise InstabilityError(message, step=state.step, time=state.t, particle=p)
 
     def energy(self, state):
-        """Kinetic and stored energy (J per unit thickness in 2D, per unit area in 1D)."""
+        """Kinetic, stored (recoverable) and dissipated (plastic work) energy (J per unit
+        thickness in 2D, per unit area in 1D)."""
         F, p = system.split(state.U, self.d)
         v = p / self.particles.rho0[:, None]
+        index, volume = self.particles.material, self.particles.volume
         kinetic = 0.5 * np.sum(self.particles.mass * np.sum(v * v, axis=1))
-        stored = np.sum(self.particles.volume * self.materials.energy(F, self.particles.material))
-        return kinetic, stored
+        stored = np.sum(volume * self.materials.energy(F, index, state.history))
+        dissipated = np.sum(volume * self.materials.dissipation(index, state.history)) if self.materials.n_history else 0.0
+        return kinetic, stored, dissipated
 
     @property
     def n_dofs_total(self):

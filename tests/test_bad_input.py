@@ -301,8 +301,8 @@ def check_stopped_run(rc, err, out):
 
     with open(out / "energy.csv") as fh:
         rows = list(csv.reader(fh))
-    assert rows[0] == ["step", "t", "kinetic", "stored", "total", "external_work", "balance", "min_J",
-                       "min_acoustic"]
+    assert rows[0] == ["step", "t", "kinetic", "stored", "dissipated", "total", "external_work", "balance",
+                       "min_J", "min_acoustic"]
     values = np.array(rows[1:], dtype=float)
     assert np.all(np.isfinite(values))
     assert values[-1, 0] == summary["steps"]

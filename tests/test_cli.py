@@ -17,7 +17,7 @@ from skdgmpm.cli import main
 from skdgmpm.run import Result, run
 
 CASES = Path(str(resources.files("skdgmpm.cases")))
-ENERGY_HEADER = ["step", "t", "kinetic", "stored", "total", "external_work", "balance", "min_J", "min_acoustic"]
+ENERGY_HEADER = ["step", "t", "kinetic", "stored", "dissipated", "total", "external_work", "balance", "min_J", "min_acoustic"]
 
 
 def cli(capsys, *argv):
