@@ -11,6 +11,7 @@ from skdgmpm.errors import InputError
 from .base import Material
 from .gavrilyuk import Gavrilyuk
 from .linear_elastic import LinearElastic
+from .mooney_rivlin import MooneyRivlin
 from .neo_hookean import NeoHookean
 from .saint_venant_kirchhoff import SaintVenantKirchhoff
 
@@ -19,13 +20,14 @@ LAWS = {
     "saint_venant_kirchhoff": SaintVenantKirchhoff,
     "neo_hookean": NeoHookean,
     "gavrilyuk": Gavrilyuk,
+    "mooney_rivlin": MooneyRivlin,
 }
 _ALIASES = {"svk": "saint_venant_kirchhoff"}
 for _name, _cls in LAWS.items():
     _cls.law_name = _name          # the scene's ``law`` value, for messages
 
-__all__ = ["LAWS", "Gavrilyuk", "LinearElastic", "Material", "NeoHookean", "SaintVenantKirchhoff",
-           "make_material"]
+__all__ = ["LAWS", "Gavrilyuk", "LinearElastic", "Material", "MooneyRivlin", "NeoHookean",
+           "SaintVenantKirchhoff", "make_material"]
 
 
 def make_material(law, **params):

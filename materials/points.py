@@ -7,7 +7,7 @@ to them as a table (`law_table`): one row of (law id, parameters) per material.
 import numpy as np
 from numba import njit
 
-from . import gavrilyuk, linear_elastic, neo_hookean, saint_venant_kirchhoff
+from . import gavrilyuk, linear_elastic, mooney_rivlin, neo_hookean, saint_venant_kirchhoff
 
 N_PARAMETERS = 4        # the widest law_parameters
 # each law's id (its class attribute ``law_id``), constants of the compiled dispatch below
@@ -15,7 +15,8 @@ NEO_HOOKEAN = neo_hookean.NeoHookean.law_id
 LINEAR_ELASTIC = linear_elastic.LinearElastic.law_id
 SAINT_VENANT_KIRCHHOFF = saint_venant_kirchhoff.SaintVenantKirchhoff.law_id
 GAVRILYUK = gavrilyuk.Gavrilyuk.law_id
-KNOWN = (NEO_HOOKEAN, LINEAR_ELASTIC, SAINT_VENANT_KIRCHHOFF, GAVRILYUK)
+MOONEY_RIVLIN = mooney_rivlin.MooneyRivlin.law_id
+KNOWN = (NEO_HOOKEAN, LINEAR_ELASTIC, SAINT_VENANT_KIRCHHOFF, GAVRILYUK, MOONEY_RIVLIN)
 
 
 @njit(cache=True, inline="always")
@@ -28,6 +29,8 @@ def tangent_point(law, prm, F, C, d):
         linear_elastic.tangent_point(F, prm, C, d)
     elif law == SAINT_VENANT_KIRCHHOFF:
         saint_venant_kirchhoff.tangent_point(F, prm, C, d)
+    elif law == MOONEY_RIVLIN:
+        mooney_rivlin.tangent_point(F, prm, C, d)
     else:                               # GAVRILYUK (law_table admits no other id)
         gavrilyuk.tangent_point(F, prm, C, d)
 
@@ -42,6 +45,8 @@ def stress_point(law, prm, F, P, d):
         linear_elastic.stress_point(F, prm, P, d)
     elif law == SAINT_VENANT_KIRCHHOFF:
         saint_venant_kirchhoff.stress_point(F, prm, P, d)
+    elif law == MOONEY_RIVLIN:
+        mooney_rivlin.stress_point(F, prm, P, d)
     else:                               # GAVRILYUK (law_table admits no other id)
         gavrilyuk.stress_point(F, prm, P, d)
 

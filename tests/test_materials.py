@@ -8,13 +8,14 @@ import pytest
 from skdgmpm.errors import InputError
 import functools
 
-from skdgmpm.materials import (LAWS, Gavrilyuk, LinearElastic, Material, NeoHookean, SaintVenantKirchhoff,
-                               make_material)
+from skdgmpm.materials import (LAWS, Gavrilyuk, LinearElastic, Material, MooneyRivlin, NeoHookean,
+                               SaintVenantKirchhoff, make_material)
 
 PARAMS = dict(E=2.0, nu=0.3, rho=1.5)
 GAVRILYUK = [functools.partial(Gavrilyuk, a=a) for a in (-1.0, 0.0, 0.5)]   # the whole range of a
-ALL = [LinearElastic, SaintVenantKirchhoff, NeoHookean, *GAVRILYUK]
-HYPERELASTIC = [SaintVenantKirchhoff, NeoHookean, *GAVRILYUK]
+MOONEY_RIVLIN = [functools.partial(MooneyRivlin, beta=b) for b in (0.0, 0.5)]
+ALL = [LinearElastic, SaintVenantKirchhoff, NeoHookean, *GAVRILYUK, *MOONEY_RIVLIN]
+HYPERELASTIC = [SaintVenantKirchhoff, NeoHookean, *GAVRILYUK, *MOONEY_RIVLIN]
 I3 = np.eye(3)
 
 
