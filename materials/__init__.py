@@ -10,6 +10,8 @@ from skdgmpm.errors import InputError
 
 from .base import Material
 from .gavrilyuk import Gavrilyuk
+from .hencky_j2 import HenckyJ2
+from .j2_plasticity import J2Plasticity
 from .linear_elastic import LinearElastic
 from .neo_hookean import NeoHookean
 from .saint_venant_kirchhoff import SaintVenantKirchhoff
@@ -19,13 +21,15 @@ LAWS = {
     "saint_venant_kirchhoff": SaintVenantKirchhoff,
     "neo_hookean": NeoHookean,
     "gavrilyuk": Gavrilyuk,
+    "j2_plasticity": J2Plasticity,
+    "hencky_j2": HenckyJ2,
 }
 _ALIASES = {"svk": "saint_venant_kirchhoff"}
 for _name, _cls in LAWS.items():
     _cls.law_name = _name          # the scene's ``law`` value, for messages
 
-__all__ = ["LAWS", "Gavrilyuk", "LinearElastic", "Material", "NeoHookean", "SaintVenantKirchhoff",
-           "make_material"]
+__all__ = ["LAWS", "Gavrilyuk", "HenckyJ2", "J2Plasticity", "LinearElastic", "Material", "NeoHookean",
+           "SaintVenantKirchhoff", "make_material"]
 
 
 def make_material(law, **params):
@@ -37,7 +41,7 @@ def make_material(law, **params):
         A key of `LAWS` or an alias (``"svk"``).
     **params
         The law's parameters (``E``, ``nu``, ``rho`` for the elastic laws, plus ``a`` for
-        ``gavrilyuk``, default -1).
+        ``gavrilyuk``, default -1, and ``sigma_y``, ``H`` for ``j2_plasticity`` and ``hencky_j2``).
 
     Returns
     -------
