@@ -10,6 +10,8 @@ from skdgmpm.errors import InputError
 
 from .base import Material
 from .gavrilyuk import Gavrilyuk
+from .hencky_j2 import HenckyJ2
+from .j2_plasticity import J2Plasticity
 from .linear_elastic import LinearElastic
 from .mooney_rivlin import MooneyRivlin
 from .neo_hookean import NeoHookean
@@ -21,13 +23,15 @@ LAWS = {
     "neo_hookean": NeoHookean,
     "gavrilyuk": Gavrilyuk,
     "mooney_rivlin": MooneyRivlin,
+    "j2_plasticity": J2Plasticity,
+    "hencky_j2": HenckyJ2,
 }
 _ALIASES = {"svk": "saint_venant_kirchhoff"}
 for _name, _cls in LAWS.items():
     _cls.law_name = _name          # the scene's ``law`` value, for messages
 
-__all__ = ["LAWS", "Gavrilyuk", "LinearElastic", "Material", "MooneyRivlin", "NeoHookean",
-           "SaintVenantKirchhoff", "make_material"]
+__all__ = ["LAWS", "Gavrilyuk", "HenckyJ2", "J2Plasticity", "LinearElastic", "Material", "MooneyRivlin",
+           "NeoHookean", "SaintVenantKirchhoff", "make_material"]
 
 
 def make_material(law, **params):
@@ -39,7 +43,7 @@ def make_material(law, **params):
         A key of `LAWS` or an alias (``"svk"``).
     **params
         The law's parameters (``E``, ``nu``, ``rho`` for the elastic laws, plus ``a`` for
-        ``gavrilyuk``, default -1).
+        ``gavrilyuk``, default -1, and ``sigma_y``, ``H`` for ``j2_plasticity`` and ``hencky_j2``).
 
     Returns
     -------

@@ -24,15 +24,15 @@ from skdgmpm.errors import InputError
 _BOUNDS = {"E": (0.0, None), "nu": (-1.0, 0.5), "rho": (0.0, None)}
 
 
-def _check_parameter(name, value, lower, upper):
-    """Raise InputError unless ``lower < value < upper`` with ``value`` a finite real number."""
+def _check_parameter(name, value, lower, upper, *, lower_closed=False):
+    """Raise InputError unless ``lower < value < upper`` (``lower <= value`` if ``lower_closed``)
+    with ``value`` a finite real number."""
     ok = isinstance(value, Real) and not isinstance(value, bool) and math.isfinite(value)
-    ok = ok and (lower is None or value > lower) and (upper is None or value < upper)
+    ok = ok and (lower is None or value > lower or (lower_closed and value == lower))
+    ok = ok and (upper is None or value < upper)
     if not ok:
-        bounds = " and ".join(
-            s for s in (lower is not None and f"> {lower:g}", upper is not None and f"< {upper:g}")
-            if s
-        )
+        low = lower is not None and f"{'>=' if lower_closed else '>'} {lower:g}"
+        bounds = " and ".join(s for s in (low, upper is not None and f"< {upper:g}") if s)
         raise InputError(f"material: {name} = {value!r} must be a finite number {bounds}")
 
 

@@ -7,7 +7,7 @@ to them as a table (`law_table`): one row of (law id, parameters) per material.
 import numpy as np
 from numba import njit
 
-from . import gavrilyuk, linear_elastic, mooney_rivlin, neo_hookean, saint_venant_kirchhoff
+from . import gavrilyuk, hencky_j2, j2_plasticity, linear_elastic, mooney_rivlin, neo_hookean, saint_venant_kirchhoff
 
 N_PARAMETERS = 4        # the widest law_parameters
 # each law's id (its class attribute ``law_id``), constants of the compiled dispatch below
@@ -16,7 +16,9 @@ LINEAR_ELASTIC = linear_elastic.LinearElastic.law_id
 SAINT_VENANT_KIRCHHOFF = saint_venant_kirchhoff.SaintVenantKirchhoff.law_id
 GAVRILYUK = gavrilyuk.Gavrilyuk.law_id
 MOONEY_RIVLIN = mooney_rivlin.MooneyRivlin.law_id
-KNOWN = (NEO_HOOKEAN, LINEAR_ELASTIC, SAINT_VENANT_KIRCHHOFF, GAVRILYUK, MOONEY_RIVLIN)
+J2_PLASTICITY = j2_plasticity.J2Plasticity.law_id
+HENCKY_J2 = hencky_j2.HenckyJ2.law_id
+KNOWN = (NEO_HOOKEAN, LINEAR_ELASTIC, SAINT_VENANT_KIRCHHOFF, GAVRILYUK, MOONEY_RIVLIN, J2_PLASTICITY, HENCKY_J2)
 
 
 @njit(cache=True, inline="always")
@@ -31,14 +33,18 @@ def tangent_point(law, prm, F, C, d):
         saint_venant_kirchhoff.tangent_point(F, prm, C, d)
     elif law == MOONEY_RIVLIN:
         mooney_rivlin.tangent_point(F, prm, C, d)
+    elif law == J2_PLASTICITY:
+        j2_plasticity.tangent_point(F, prm, C, d)
+    elif law == HENCKY_J2:
+        hencky_j2.tangent_point(F, prm, C, d)
     else:                               # GAVRILYUK (law_table admits no other id)
         gavrilyuk.tangent_point(F, prm, C, d)
 
 
 @njit(cache=True, inline="always")
 def stress_point(law, prm, F, P, d):
-    """d-block P (d, d) of the first Piola stress of law ``law`` with parameters ``prm`` at one
-    embedded F (3, 3)."""
+    """d-block P (d, d) of the first Piola stress of hyperelastic law ``law`` with parameters
+    ``prm`` at one embedded F (3, 3) (laws with history: `stress_update_point`)."""
     if law == NEO_HOOKEAN:
         neo_hookean.stress_point(F, prm, P, d)
     elif law == LINEAR_ELASTIC:
@@ -56,7 +62,12 @@ def stress_update_point(law, prm, F, h_n, h, P, d):
     """d-block P (d, d) of the first Piola stress at one embedded F (3, 3) at t_{n+1} from the
     internal variables h_n (n_history,) of t_n, and their update h: the return mapping of a law
     with history; a hyperelastic law ignores h_n and h (zero width)."""
-    stress_point(law, prm, F, P, d)
+    if law == J2_PLASTICITY:
+        j2_plasticity.stress_update_point(F, prm, h_n, h, P, d)
+    elif law == HENCKY_J2:
+        hencky_j2.stress_update_point(F, prm, h_n, h, P, d)
+    else:
+        stress_point(law, prm, F, P, d)
 
 
 def law_table(materials):

@@ -186,9 +186,11 @@ def test_bad_parameters_raise_input_error(name, value):
 
 
 def test_make_material_by_name():
-    assert set(LAWS) == {"linear_elastic", "saint_venant_kirchhoff", "neo_hookean", "gavrilyuk"}
+    assert set(LAWS) == {"linear_elastic", "saint_venant_kirchhoff", "neo_hookean", "gavrilyuk",
+                         "mooney_rivlin", "j2_plasticity", "hencky_j2"}
     for name, cls in LAWS.items():
-        assert make_material(name, **PARAMS) == cls(**PARAMS)
+        params = {**PARAMS, "sigma_y": 1e-3, "H": 0.1} if cls.history_names else PARAMS   # plastic laws
+        assert make_material(name, **params) == cls(**params)
     assert isinstance(make_material("svk", **PARAMS), SaintVenantKirchhoff)
     with pytest.raises(InputError, match="known laws: .*linear_elastic.*neo_hookean") as info:
         make_material("mooney", **PARAMS)
