@@ -1,4 +1,7 @@
-"""Compressible Mooney-Rivlin hyperelasticity (the neo-Hookean law plus a second-invariant term)."""
+"""Compressible Mooney-Rivlin hyperelasticity (the neo-Hookean law plus a second-invariant term).
+
+Its point functions are compiled functions of their own, called (not inlined) by the fused passes
+(see `materials.points`): a law added to the engine costs its own compile time only."""
 
 from dataclasses import dataclass
 
@@ -28,7 +31,7 @@ def _invariants(F):
     return ok, J, G, C[0, 0] + C[1, 1] + C[2, 2], C, B
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def stress_point(F, prm, P, d):
     """d-block P (d, d) of P = 2 c1 F + 2 c2 (I1 F - F C) - m G + lam ln(J) G at one embedded F;
     prm = (c1, c2, m, lam)."""
@@ -44,7 +47,7 @@ def stress_point(F, prm, P, d):
             P[i, a] = 2.0 * c1 * f + 2.0 * c2 * (I1 * f - FC) + g * G[3 * i + a]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def tangent_point(F, prm, C, d):
     """C_iajb = 2 c1 d_ij d_ab + 2 c2 (2 F_ia F_jb + I1 d_ij d_ab - d_ij C_ab - F_ib F_ja - B_ij d_ab)
     + (m - lam ln J) G_ib G_ja + lam G_ia G_jb into the d-block C (d, d, d, d); prm = (c1, c2, m, lam).

@@ -3,6 +3,13 @@
 Kernels that loop over points or faces themselves (the DGMPM face and particle passes, the health
 check) evaluate the law inside their loop through `tangent_point`; a set of materials is handed
 to them as a table (`law_table`): one row of (law id, parameters) per material.
+
+Every law inlined here is compiled into every fused pass that evaluates a law (the face passes,
+the health check), twice per pass where it has a literal-d branch: compile time grows with each
+law's code. The four laws of the benchmarks are inlined (their speed matters in those passes);
+a law added since is called as a compiled function of its own (`inline` left at "never"), cheap
+to compile once, a little slower per call. A law whose Riemann tangent is another law's shares
+that law's branch (a second inlined copy of the same code would only cost compile time).
 """
 import numpy as np
 from numba import njit
@@ -25,18 +32,14 @@ KNOWN = (NEO_HOOKEAN, LINEAR_ELASTIC, SAINT_VENANT_KIRCHHOFF, GAVRILYUK, MOONEY_
 def tangent_point(law, prm, F, C, d):
     """d-block C (d, d, d, d) of the tangent of law ``law`` with parameters ``prm`` at one
     embedded F (3, 3)."""
-    if law == NEO_HOOKEAN:
+    if law == NEO_HOOKEAN or law == HENCKY_J2:         # hencky_j2's Riemann tangent is the neo-Hookean one
         neo_hookean.tangent_point(F, prm, C, d)
-    elif law == LINEAR_ELASTIC:
+    elif law == LINEAR_ELASTIC or law == J2_PLASTICITY:  # j2_plasticity's: the linear elastic one
         linear_elastic.tangent_point(F, prm, C, d)
     elif law == SAINT_VENANT_KIRCHHOFF:
         saint_venant_kirchhoff.tangent_point(F, prm, C, d)
-    elif law == MOONEY_RIVLIN:
+    elif law == MOONEY_RIVLIN:                         # a call, not inlined (see the module docstring)
         mooney_rivlin.tangent_point(F, prm, C, d)
-    elif law == J2_PLASTICITY:
-        j2_plasticity.tangent_point(F, prm, C, d)
-    elif law == HENCKY_J2:
-        hencky_j2.tangent_point(F, prm, C, d)
     else:                               # GAVRILYUK (law_table admits no other id)
         gavrilyuk.tangent_point(F, prm, C, d)
 

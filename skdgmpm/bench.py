@@ -42,6 +42,11 @@ for _p in (1, 2, 3):
     METHODS[f"ader-dgfem-{_p}"] = ['method.name="ader-dgfem"', f"method.order={_p}", "method.cfl=0.4"]
     METHODS[f"rk-dgfem-{_p}"] = ['method.name="rk-dgfem"', f"method.order={_p}", "method.cfl=0.4",
                                  f'method.integrator="{"rk2" if _p == 1 else "rk4"}"']
+# elastoplastic rows: the same impact on a small-strain J2 steel (history at the points); compare
+# with the neo-Hookean rows of the same method for the cost of the history
+J2 = ['material.law="j2_plasticity"', "material.sigma_y=4e8", "material.H=1e10"]
+METHODS["dgmpm-ctu-j2"] = [*METHODS["dgmpm-ctu"], *J2]
+METHODS["ader-dgmpm-1-j2"] = [*METHODS["ader-dgmpm-1"], *J2]
 STAGES = {"euler": 1, "rk2": 2, "rk4": 4}
 
 

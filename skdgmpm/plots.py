@@ -115,3 +115,28 @@ def profile(result, path=None, field="P11", state=None, ax=None):
         fig.savefig(path, dpi=110)
         plt.close(fig)
     return ax
+
+
+def field_map(result, field, path=None, state=None, ax=None, cmap="viridis"):
+    """A 2D map of ``field`` at the points' current positions (a sequential colour map: eqp and
+    other fields that only grow from zero)."""
+    state = state or result.state
+    fig = None
+    if ax is None:
+        plt = _figure()
+        fig, ax = plt.subplots(figsize=(6, 4))
+    values = result.fields(state)[field]
+    size = 4e4 / max(len(values), 1)
+    sc = ax.scatter(state.x[:, 0], state.x[:, 1], c=values, s=min(max(size, 1.0), 30.0), cmap=cmap,
+                    vmin=0.0 if values.min() >= 0 else None, marker="s", linewidths=0)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x1 (m)")
+    ax.set_ylabel("x2 (m)")
+    ax.set_title(f"{result.scene.name}: {field} at t = {state.t:.3g} s")
+    if fig is not None:
+        fig.colorbar(sc, ax=ax, label=field_label(field), shrink=0.8)
+        if path is not None:
+            fig.tight_layout()
+            fig.savefig(path, dpi=110)
+            plt.close(fig)
+    return ax

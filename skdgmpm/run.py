@@ -263,6 +263,11 @@ def _plots(result, folder):
     plots.energy(result, folder / "energy.png")
     if result.scene.dim == 1 or result.exact is not None:
         plots.profile(result, folder / "profile.png")
+    if "eqp" in result.fields():                # a law with plastic flow: where it flowed
+        if result.scene.dim == 1:
+            plots.profile(result, folder / "eqp.png", field="eqp")
+        else:
+            plots.field_map(result, "eqp", folder / "eqp.png")
 
 
 class _NoBar:

@@ -46,3 +46,49 @@ def test_mooney_rivlin_at_small_strain_is_linear_elastic(method):
 
     assert gap(1.0e6) < 1e-4
     assert gap(1.0e9) > 1e-3
+
+
+# -------------------------------------------------------------------- elastoplastic bar (METHOD §10)
+PLASTIC_BAR = ["grid.cells=60", "run.t_end=4e-4"]     # fronts at c_p t = 1.9 m and c_e t = 2.35 m of 6 m
+
+
+def plateaus(result, exact):
+    """Median of P11, v1 and eqp over the particles of each exact region, 3 cells away from the
+    fronts, and the positions where P11 crosses the middle of each jump."""
+    t, X = result.state.t, result.X[:, 0]
+    c_p, c_e = exact.speeds
+    h = 6.0 / 60
+    f = result.fields()
+    regions = {"plastic": X < c_p * t - 3 * h, "elastic": (X > c_p * t + 3 * h) & (X < c_e * t - 3 * h),
+               "rest": X > c_e * t + 3 * h}
+    out = {name: {k: float(np.median(f[k][sel])) for k in ("P11", "v1", "eqp")} for name, sel in regions.items()}
+    order = np.argsort(X)
+    P = f["P11"][order]
+    for name, level in (("front_p", 0.5 * (exact.traction - exact.sigma_HEL)), ("front_e", -0.5 * exact.sigma_HEL)):
+        out[name] = float(X[order][np.flatnonzero(P < level).max()])     # last particle beyond the level
+    return out
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_elastoplastic_bar_two_waves_in_every_method(method, record_property):
+    """A compressive step above the Hugoniot elastic limit: the elastic precursor (-sigma_HEL) and
+    the plastic wave, with the history at each method's own points, against the exact two-front
+    solution (skdgmpm.exact.ElastoplasticBarStep): plateaus of P11 and v1 within 1 %, eqp within
+    3 %, no plastic strain ahead of the plastic front, both fronts within 2 cells."""
+    r = run("bar_elastoplastic_1d", METHODS[method] + PLASTIC_BAR, progress=False)
+    assert r.status == "ok"
+    ex = r.exact
+    found = plateaus(r, ex)
+    record_property("plateaus", found)
+    behind, between = ex.states[0], ex.states[1]
+    for name, state in (("plastic", behind), ("elastic", between)):
+        assert found[name]["P11"] == pytest.approx(state["P11"], rel=1e-2), name
+        assert found[name]["v1"] == pytest.approx(state["v1"], rel=1e-2), name
+    assert found["plastic"]["eqp"] == pytest.approx(behind["eqp"], rel=3e-2)
+    assert found["elastic"]["eqp"] == found["rest"]["eqp"] == 0.0
+    t = r.state.t
+    assert abs(found["front_p"] - ex.c_p * t) < 2 * 0.1
+    assert abs(found["front_e"] - ex.c_e * t) < 2 * 0.1
+    h = r.history                                # plastic work done, the balance never grows
+    assert h["dissipated"][-1] > 0.0
+    assert np.diff(h["balance"]).max() <= 1e-9 * h["external_work"].max()
