@@ -23,7 +23,7 @@ from scipy.optimize import brentq
 from skdgmpm.errors import InputError
 from skdgmpm.manufactured import MANUFACTURED
 
-__all__ = ["EXACT", "ElasticBarStep", "SVKBarRiemann", "error_norms", "make_exact"]
+__all__ = ["EXACT", "ElasticBarStep", "ElastoplasticBarStep", "SVKBarRiemann", "error_norms", "make_exact"]
 
 
 def _check(cls, key, value, ok, what):
@@ -250,6 +250,146 @@ class SVKBarRiemann:
 
 
 @dataclass(frozen=True, kw_only=True)
+class ElastoplasticBarStep:
+    """Small-strain J2 bar ``0 <= X <= L`` in uniaxial strain under a traction step at ``X = 0``.
+
+    Strain ``eps = diag(e, 0, 0)`` with ``e = F11 - 1`` (``F = diag(F11, 1, 1)``); isotropic
+    linear elasticity (``lam, mu, K = lam + 2 mu / 3`` from ``E, nu``), von Mises yield
+    ``q = sqrt(3/2 s:s) <= sigma_y + H eqp`` with linear isotropic hardening ``H >= 0`` and
+    associated flow, the law of METHOD §10. At rest for ``t < 0``; for ``t >= 0`` the left end
+    carries ``P11 = traction`` (negative: compression; at small strain ``P = sigma``). The
+    solution below holds until the precursor reaches the far end, ``t_max = length / c_e``
+    (whatever holds that end); later times raise an InputError.
+
+    Derivation. Along ``eps = diag(e, 0, 0)`` the deviatoric strain is ``e diag(2, -1, -1) / 3``,
+    a fixed direction, so the radial return is exact for any step along the path and the law is
+    a function of ``e``. Elastic: ``sigma11 = (lam + 2 mu) e``, ``sigma22 = sigma33 = lam e``,
+    ``q = 2 mu |e|``: yield at ``|e_Y| = sigma_y / (2 mu)``, ``|sigma11| = sigma_HEL =
+    (lam + 2 mu) sigma_y / (2 mu)``. Plastic (``s = sgn(e) q diag(2, -1, -1) / 3``, flow
+    ``eps_p = sgn(e) eqp diag(1, -1/2, -1/2)``): ``q = 2 mu |e| - 3 mu eqp = sigma_y + H eqp``
+    gives ``eqp = 2 mu (|e| - |e_Y|) / (3 mu + H)`` and ``sigma11 = K e + sgn(e) 2 q / 3``,
+    ``d sigma11 / de = M_p = K + 4 mu H / (3 (3 mu + H)) < lam + 2 mu``, constant: the stress
+    is piecewise linear in ``e``, so each wave is a shock (no fan) of speed ``sqrt(modulus /
+    rho)``, the faster one first. Each right-going front ``X = c t`` obeys ``[sigma] = -rho c
+    [v]`` (momentum) and ``[v] = -c [e]`` (compatibility), ``[.]`` = ahead - behind.
+
+    With ``s = sgn(traction)`` and ``c_e = sqrt((lam + 2 mu) / rho)``, ``c_p = sqrt(M_p /
+    rho)`` (``sqrt(K / rho)`` for ``H = 0``), the regions are
+
+    0. ``X > c_e t``: rest, ``e = v = sigma = eps_p = eqp = 0``;
+    1. ``c_p t < X <= c_e t`` (elastic precursor, only if ``|traction| > sigma_HEL``):
+       ``e1 = s sigma_y / (2 mu)``, ``P11 = s sigma_HEL``, ``P22 = P33 = lam e1``,
+       ``v1 = -c_e e1``, ``eps_p = eqp = 0``;
+    2. ``X <= c_p t`` (plastic shock): ``e2 = e1 + (traction - s sigma_HEL) / M_p``,
+       ``P11 = traction``, ``v2 = v1 - c_p (e2 - e1)``, ``eqp2 = 2 mu |e2 - e1| / (3 mu + H)``,
+       ``eps_p11 = s eqp2`` (``eps_p22 = eps_p33 = -eps_p11 / 2``),
+       ``P22 = P33 = traction - s (sigma_y + H eqp2)``.
+
+    Below the elastic limit (``|traction| <= sigma_HEL``) there is one elastic front at ``c_e``
+    with ``e = traction / (lam + 2 mu)``, ``v = -c_e e``: the ElasticBarStep solution with
+    ``E = lam + 2 mu`` before its reflection. Returned also: ``"eps11" = e`` and the
+    displacement ``"u1"`` (zero ahead of the fronts, ``du1/dX = e``, ``du1/dt = v1``).
+
+    Parameters
+    ----------
+    E, nu, rho : float
+        Young's modulus (Pa, > 0), Poisson ratio (in (-1, 0.5)), density (kg/m^3, > 0).
+    sigma_y, H : float
+        Yield stress (Pa, > 0) and hardening modulus of ``q = sigma_y + H eqp`` (Pa, >= 0).
+    traction : float
+        Imposed ``P11`` at ``X = 0`` (Pa): negative is compression.
+    length : float or None
+        Bar length (m): the solution is refused after ``t_max = length / c_e``; None: a
+        half-space, any ``t >= 0``.
+    """
+
+    E: float
+    nu: float
+    rho: float
+    sigma_y: float
+    H: float
+    traction: float
+    length: float | None = None
+    lam: float = field(init=False)
+    mu: float = field(init=False)
+    K: float = field(init=False)
+    M_p: float = field(init=False)
+    sigma_HEL: float = field(init=False)
+    c_e: float = field(init=False)
+    c_p: float = field(init=False)
+    plastic: bool = field(init=False)
+    states: tuple = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        cls, put = type(self), lambda k, v: object.__setattr__(self, k, v)
+        for key in ("E", "rho", "sigma_y"):
+            put(key, _check(cls, key, getattr(self, key), lambda x: x > 0, "a number > 0"))
+        put("nu", _check(cls, "nu", self.nu, lambda x: -1 < x < 0.5, "a number in (-1, 0.5)"))
+        put("H", _check(cls, "H", self.H, lambda x: x >= 0, "a number >= 0"))
+        put("traction", _check(cls, "traction", self.traction, lambda x: True, "a finite number"))
+        if self.length is not None:
+            put("length", _check(cls, "length", self.length, lambda x: x > 0, "a number > 0"))
+        E, nu, rho, sy, H, T = self.E, self.nu, self.rho, self.sigma_y, self.H, self.traction
+        lam, mu = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+        K = lam + 2 * mu / 3
+        M_e, M_p = lam + 2 * mu, K + 4 * mu * H / (3 * (3 * mu + H))
+        HEL = M_e * sy / (2 * mu)
+        put("lam", lam), put("mu", mu), put("K", K), put("M_p", M_p), put("sigma_HEL", HEL)
+        put("c_e", math.sqrt(M_e / rho)), put("c_p", math.sqrt(M_p / rho))
+        put("plastic", abs(T) > HEL)
+        s = math.copysign(1.0, T)
+        rest = _bar_state(0.0, 0.0, 0.0, 0.0, 0.0)
+        if not self.plastic:            # one elastic front carrying the load
+            e = T / M_e
+            put("states", (_bar_state(e, T, lam * e, -self.c_e * e, 0.0), rest))
+            return
+        e1 = s * sy / (2 * mu)
+        one = _bar_state(e1, s * HEL, lam * e1, -self.c_e * e1, 0.0)
+        e2 = e1 + (T - s * HEL) / M_p
+        eqp = 2 * mu * abs(e2 - e1) / (3 * mu + H)
+        two = _bar_state(e2, T, T - s * (sy + H * eqp), one["v1"] - self.c_p * (e2 - e1), s * eqp)
+        put("states", (two, one, rest))
+
+    @property
+    def speeds(self):
+        """Front speeds, slowest first: ``(c_p, c_e)`` or ``(c_e,)`` below the elastic limit."""
+        return (self.c_p, self.c_e) if self.plastic else (self.c_e,)
+
+    @property
+    def t_max(self):
+        """Time when the precursor reaches ``X = length`` (``inf`` without a length)."""
+        return math.inf if self.length is None else self.length / self.c_e
+
+    def fields(self, X, t):
+        """Exact fields at reference positions ``X`` and time ``t <= t_max``.
+
+        Returns
+        -------
+        dict
+            ``"P11"``, ``"P22"``, ``"P33"`` (Pa), ``"v1"`` (m/s), ``"F11"``, ``"eps11"``,
+            ``"eps_p11"``, ``"eqp"`` and ``"u1"`` (m).
+        """
+        x, t = _positions(X), _time(t)
+        if t > self.t_max * (1 + 1e-12):
+            raise InputError(f"{type(self).__name__}: bad value for 't': {t!r} (the solution holds "
+                             f"until the elastic front reaches X = length, t_max = {self.t_max:.6g} s)")
+        fronts = np.array(self.speeds) * t              # region k: behind front k, ahead of k - 1
+        region = np.searchsorted(fronts, x, side="left")  # on a front: the state behind it
+        out = {k: np.array([st[k] for st in self.states])[region] for k in self.states[0]}
+        # u1 = -int_X^{c_e t} e dX: the part of [X, c_e t] behind each front times its strain
+        lo = np.concatenate([[-np.inf], fronts[:-1]])
+        overlap = np.clip(fronts - np.maximum(x[:, None], lo), 0.0, None)
+        out["u1"] = -overlap @ np.array([st["eps11"] for st in self.states[:-1]])
+        return out
+
+
+def _bar_state(e, P11, P22, v, eps_p11):
+    """One constant state of the uniaxial-strain bar (eqp = |eps_p11| on this path)."""
+    return {"P11": P11, "P22": P22, "P33": P22, "v1": v, "F11": 1.0 + e, "eps11": e,
+            "eps_p11": eps_p11, "eqp": abs(eps_p11)}
+
+
+@dataclass(frozen=True, kw_only=True)
 class StandingWave2D:
     """Standing P-wave eigenmode of a linear elastic rectangle [0, lx] x [0, ly] (plane strain)
     with zero normal velocity and zero shear on all four sides (symmetry planes).
@@ -334,6 +474,7 @@ INITIAL = {"square_initial_strain": SquareInitialStrain}
 
 
 EXACT = {"elastic_bar_step": ElasticBarStep, "svk_bar_riemann": SVKBarRiemann,
+         "elastoplastic_bar_step": ElastoplasticBarStep,
          "standing_wave_2d": StandingWave2D, **MANUFACTURED}     # manufactured: built from the scene's material
 
 

@@ -189,8 +189,10 @@ def exact_solution(scene):
             raise InputError(f"{scene.where('material')}: {str(exc).removeprefix('material: ')}") from None
         if name == "mms_ring":
             params.update(scene.get("body.ring") or {})  # the ring that holds the particles
-    if name in ("svk_bar_riemann", "standing_wave_2d"):
+    if name in ("svk_bar_riemann", "standing_wave_2d", "elastoplastic_bar_step"):
         params["nu"] = mat.get("nu")
+    if name == "elastoplastic_bar_step":                 # yield and hardening: the law's, or [exact]'s
+        params.update({k: mat[k] for k in ("sigma_y", "H") if k in mat})
     if name == "standing_wave_2d":
         params["size"] = tuple(scene.get("grid.size", (1.0, 1.0)))
     if "load" in spec:                                   # P11 = t . N with N = -e1 at the left end
@@ -202,7 +204,7 @@ def exact_solution(scene):
             raise InputError(f"{scene.where('exact.load')} = {load!r}: bc.{load} must be of kind "
                              f"'traction' or 'free', not {bc.get('kind')!r}")
         params["traction"] = -float(np.atleast_1d(bc.get("value", [0.0]))[0])
-    if name == "elastic_bar_step":
+    if name in ("elastic_bar_step", "elastoplastic_bar_step"):
         params["length"] = scene.get("grid.length", scene.get("grid.size", [None])[0])
     params.update(spec)
     try:

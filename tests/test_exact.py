@@ -7,7 +7,7 @@ import pytest
 from scipy.integrate import quad
 
 from skdgmpm.errors import InputError
-from skdgmpm.exact import EXACT, ElasticBarStep, SVKBarRiemann, error_norms, make_exact
+from skdgmpm.exact import EXACT, ElasticBarStep, ElastoplasticBarStep, SVKBarRiemann, error_norms, make_exact
 
 STEEL = dict(E=2e11, rho=7800.0)
 T = 1e9  # compressive load magnitude of [R18 §7.1]
@@ -159,7 +159,7 @@ def test_svk_zero_load_is_rest():
 # ---------------------------------------------------------------- registry, errors, norms
 def test_registry():
     assert set(EXACT) == {"elastic_bar_step", "svk_bar_riemann", "standing_wave_2d",
-                          "mms_axis_aligned", "mms_ring"}     # the last two: tests/test_manufactured.py
+                          "elastoplastic_bar_step", "mms_axis_aligned", "mms_ring"}     # the last two: tests/test_manufactured.py
     b = make_exact("elastic_bar_step", length=6.0, traction=-T, **STEEL)
     assert isinstance(b, ElasticBarStep)
     with pytest.raises(AttributeError):
@@ -238,3 +238,165 @@ def test_standing_wave_solves_the_equations_and_the_symmetry_conditions():
     for side in (np.column_stack([s, 0 * s]), np.column_stack([s, 1 + 0 * s])):
         g = sol.fields(side, t)
         assert np.allclose(g["v2"], 0, atol=1e-12) and np.allclose(g["P21"], 0, atol=1e-3)
+
+
+# ---------------------------------------------------------------- elastoplastic bar (METHOD §10)
+J2 = dict(E=2e11, nu=0.3, rho=7800.0, sigma_y=4e8)           # sigma_HEL = 7e8 Pa
+
+
+def plastic_bar(traction=-2e9, H=1e9, **kw):
+    return ElastoplasticBarStep(traction=traction, H=H, **J2, **kw)
+
+
+def j2_path(e_end, E, nu, sigma_y, H, steps=400):
+    """Small-strain J2 radial return (3D, linear isotropic hardening q <= sigma_y + H eqp)
+    along eps = diag(e, 0, 0), e from 0 to e_end in equal steps: (sigma, eps_p, eqp)."""
+    lam, mu = E * nu / ((1 + nu) * (1 - 2 * nu)), E / (2 * (1 + nu))
+    eps_p, eqp, I = np.zeros((3, 3)), 0.0, np.eye(3)
+    for e in np.linspace(0.0, e_end, steps + 1)[1:]:
+        strain = np.diag([e, 0.0, 0.0]) - eps_p
+        trial = lam * np.trace(strain) * I + 2 * mu * strain
+        s = trial - np.trace(trial) / 3 * I
+        q = math.sqrt(1.5 * np.sum(s * s))
+        f = q - (sigma_y + H * eqp)
+        if f > 0:
+            dg, n = f / (3 * mu + H), 1.5 * s / q
+            eps_p, eqp = eps_p + dg * n, eqp + dg
+    strain = np.diag([e_end, 0.0, 0.0]) - eps_p
+    return lam * np.trace(strain) * I + 2 * mu * strain, eps_p, eqp
+
+
+def sides(sol, front, t, rel=1e-9):
+    """Fields just behind and just ahead of the front at X = front."""
+    return sol.fields(col([front * (1 - rel)]), t), sol.fields(col([front * (1 + rel)]), t)
+
+
+@pytest.mark.parametrize("traction, H", [(-2e9, 1e9), (-2e9, 0.0), (-1.5e10, 5e10), (3e9, 2e9)])
+def test_elastoplastic_bar_jump_conditions(traction, H):
+    """Rankine-Hugoniot across both fronts: [P11] = -rho c [v1] (momentum), [v1] = -c [F11]
+    (compatibility); the loaded end carries the traction, the far side is at rest."""
+    b = plastic_bar(traction, H)
+    assert b.plastic and b.speeds == (b.c_p, b.c_e) and b.c_p < b.c_e
+    t = 2e-4
+    for c in b.speeds:
+        behind, ahead = sides(b, c * t, t)
+        jP, jv, jF = (ahead[k][0] - behind[k][0] for k in ("P11", "v1", "F11"))
+        assert abs(jP) > 1e6 and jP == pytest.approx(-b.rho * c * jv, rel=1e-9)
+        assert jv == pytest.approx(-c * jF, rel=1e-9)
+    f = b.fields(col([0.0, 0.999 * b.c_e * t, 1.001 * b.c_e * t, 6.0]), t)
+    assert f["P11"][0] == traction and math.copysign(1, f["P11"][1]) == math.copysign(1, traction)
+    assert abs(f["P11"][1]) == pytest.approx(b.sigma_HEL, rel=1e-12)
+    for k in f:
+        assert np.all(f[k][2:] == (1.0 if k == "F11" else 0.0)), k
+
+
+@pytest.mark.parametrize("traction, H", [(-2e9, 1e9), (-2e9, 0.0), (-1.5e10, 5e10), (3e9, 2e9)])
+def test_elastoplastic_bar_states_match_a_radial_return_along_the_path(traction, H):
+    """The states behind each front against an independent J2 radial return along
+    eps = diag(e, 0, 0) up to the front's strain: stresses, plastic strain, eqp, and the front
+    speeds from the path's moduli (rho c_e^2 = sigma/e at the yield point, rho c_p^2 = the
+    secant modulus from there to the loaded state)."""
+    b, t = plastic_bar(traction, H), 1e-4
+    one, two = (b.fields(col([0.5 * (lo + hi) * t]), t) for lo, hi in ((b.c_p, b.c_e), (0.0, b.c_p)))
+    params = dict(E=J2["E"], nu=J2["nu"], sigma_y=J2["sigma_y"], H=H)
+    scale = abs(traction)
+    for region in (one, two):
+        e = region["eps11"][0]
+        assert region["F11"][0] == pytest.approx(1 + e, abs=1e-15)
+        sigma, eps_p, eqp = j2_path(e, **params)
+        assert np.allclose(np.diag(sigma), [region[k][0] for k in ("P11", "P22", "P33")], rtol=0,
+                           atol=1e-9 * scale)
+        assert np.allclose(sigma - np.diag(np.diag(sigma)), 0.0, atol=1e-9 * scale)
+        assert eqp == pytest.approx(region["eqp"][0], rel=1e-9, abs=1e-15)
+        assert eps_p[0, 0] == pytest.approx(region["eps_p11"][0], rel=1e-9, abs=1e-15)
+        assert np.allclose(np.diag(eps_p)[1:], -0.5 * region["eps_p11"][0], rtol=1e-9, atol=1e-15)
+    assert one["eqp"][0] == 0.0 and two["eqp"][0] > 0
+    e1, e2 = one["eps11"][0], two["eps11"][0]
+    s1, s2 = j2_path(e1, **params)[0][0, 0], j2_path(e2, **params)[0][0, 0]
+    assert b.rho * b.c_e ** 2 == pytest.approx(s1 / e1, rel=1e-9)
+    assert b.rho * b.c_p ** 2 == pytest.approx((s2 - s1) / (e2 - e1), rel=1e-8)
+    # just below the yield strain the path is elastic, just above it plastic
+    assert j2_path(0.999 * e1, **params)[2] == 0.0 < j2_path(1.001 * e1, **params)[2]
+
+
+def test_elastoplastic_bar_perfect_plasticity_and_moduli():
+    b = plastic_bar(H=0.0)
+    assert b.c_p == pytest.approx(math.sqrt(b.K / b.rho), rel=1e-14)
+    assert b.sigma_HEL == pytest.approx((b.lam + 2 * b.mu) * b.sigma_y / (2 * b.mu), rel=1e-14)
+    assert b.c_e == pytest.approx(math.sqrt((b.lam + 2 * b.mu) / b.rho), rel=1e-14)
+    stiff = plastic_bar(H=1e15)                                  # hardening -> elastic modulus
+    assert stiff.c_p == pytest.approx(stiff.c_e, rel=1e-4)
+
+
+def test_elastoplastic_bar_displacement_and_symmetry():
+    """u1: du1/dX = eps11, du1/dt = v1 away from the fronts, zero ahead; tension mirrors
+    compression."""
+    b, t = plastic_bar(), 3e-4
+    x = np.linspace(0.0, 2.0, 81)
+    x = x[(np.abs(x - b.c_p * t) > 0.02) & (np.abs(x - b.c_e * t) > 0.02)]
+    f = b.fields(col(x), t)
+    h, dt = 1e-5, 1e-9
+    dudx = (b.fields(col(x + h), t)["u1"] - b.fields(col(x - h), t)["u1"]) / (2 * h)
+    dudt = (b.fields(col(x), t + dt)["u1"] - b.fields(col(x), t - dt)["u1"]) / (2 * dt)
+    assert np.allclose(dudx, f["eps11"], rtol=1e-6, atol=1e-12)
+    assert np.allclose(dudt, f["v1"], rtol=1e-6, atol=1e-9)
+    assert np.all(f["u1"][x > b.c_e * t] == 0.0) and np.all(f["u1"][x < b.c_p * t] > 0)
+    g = plastic_bar(traction=2e9).fields(col(x), t)
+    for k in ("P11", "P22", "v1", "eps11", "eps_p11", "u1"):
+        assert np.allclose(g[k], -f[k], rtol=1e-14, atol=0), k
+    assert np.allclose(g["eqp"], f["eqp"], rtol=1e-14, atol=0)
+
+
+@pytest.mark.parametrize("traction", [-7e8, -3e8, 5e8, 0.0])
+def test_elastoplastic_bar_below_the_elastic_limit_is_one_elastic_front(traction):
+    """|traction| <= sigma_HEL: a single front at c_e, the ElasticBarStep solution with
+    E = lam + 2 mu (uniaxial strain) before its reflection; no plastic strain."""
+    b = plastic_bar(traction, length=6.0)
+    assert not b.plastic and b.speeds == (b.c_e,)
+    bar = ElasticBarStep(length=6.0, E=b.lam + 2 * b.mu, rho=b.rho, traction=traction)
+    assert bar.c == pytest.approx(b.c_e, rel=1e-14)
+    t = 0.7 * b.t_max
+    x = np.linspace(0, 6.0, 301)
+    f, g = b.fields(col(x), t), bar.fields(col(x), t)
+    for k in ("P11", "v1", "F11", "u1"):
+        assert np.allclose(f[k], g[k], rtol=1e-12, atol=1e-12 * max(1.0, np.abs(g[k]).max())), k
+    assert np.all(f["eqp"] == 0.0) and np.all(f["eps_p11"] == 0.0)
+    assert np.allclose(f["P22"], b.lam * f["eps11"], rtol=1e-14, atol=0)
+
+
+def test_elastoplastic_bar_refuses_times_after_the_far_end():
+    b = plastic_bar(length=6.0)
+    assert b.t_max == pytest.approx(6.0 / b.c_e, rel=1e-14)
+    b.fields(col([6.0]), b.t_max)                                # the precursor at the far end
+    with pytest.raises(InputError, match="t_max") as info:
+        b.fields(col([1.0]), 1.01 * b.t_max)
+    assert "\n" not in str(info.value)
+    assert plastic_bar().t_max == math.inf                       # half-space: any time
+
+
+@pytest.mark.parametrize("params, word", [
+    (dict(J2, H=1e9, traction=-2e9, sigma_y=0.0), "sigma_y"),
+    (dict(J2, H=-1.0, traction=-2e9), "'H'"),
+    (dict(J2, H=1e9, traction=-2e9, nu=0.5), "nu"),
+    (dict(J2, H=1e9, traction=-2e9, rho=-1.0), "rho"),
+    (dict(J2, H=1e9, traction=-2e9, length=0.0), "length"),
+    (dict(J2, H=float("nan"), traction=-2e9), "'H'"),
+    (dict(J2, traction=-2e9), "'H'"),                               # missing
+    (dict(J2, H=1e9, traction=-2e9, M_p=1.0), "M_p"),               # derived, not a parameter
+])
+def test_elastoplastic_bar_bad_params(params, word):
+    with pytest.raises(InputError, match=word) as info:
+        make_exact("elastoplastic_bar_step", **params)
+    assert "\n" not in str(info.value)
+
+
+def test_elastoplastic_bar_from_a_scene():
+    """[exact] name = "elastoplastic_bar_step" takes the load from the boundary (t = P.N), the
+    length and elastic constants from the scene, yield and hardening from [exact] (or the law)."""
+    from skdgmpm.scene import exact_solution, load_scene
+
+    scene = load_scene("bar_elastic_1d", ['exact={name = "elastoplastic_bar_step", load = "left", '
+                                          'sigma_y = 4e8, H = 1e9}', "material.nu=0.3"])
+    b = exact_solution(scene)
+    assert isinstance(b, ElastoplasticBarStep)
+    assert (b.traction, b.length, b.nu, b.sigma_y, b.H) == (-1e9, 6.0, 0.3, 4e8, 1e9) and b.plastic
