@@ -14,7 +14,8 @@ def _cmd_run(args):
     result = run(args.case, overrides=args.set, out=out, force=args.force, progress=not args.quiet)
     summary = result.summary()
     print(f"{summary['case']}: {summary['status']}, {summary['steps']} steps to t = "
-          f"{summary['t_final']:.6g} s in {summary['wall_s']:.2f} s -> {out}")
+          f"{summary['t_final']:.6g} s in {summary['wall_s']:.2f} s (+ {summary['startup_s']:.2f} s start-up) "
+          f"-> {out}")
     for name, norms in summary.get("errors", {}).items():
         print(f"  {name:>6}: L1_rel {norms['L1_rel']:.3e}  L2_rel {norms['L2_rel']:.3e}  "
               f"Linf {norms['Linf']:.3e}")

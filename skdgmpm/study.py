@@ -109,7 +109,7 @@ def convergence(scene_name, methods, orders, cells, overrides=(), fields=None, p
                 reference=None, cfls=None, measure="l2", executor=None):
     """Run every (method, order, grid, CFL) and return one row per run.
 
-    Rows: method, order, cells, h, cfl, dt (mean step), dofs, steps, wall_s, status, and the
+    Rows: method, order, cells, h, cfl, dt (mean step), dofs, steps, wall_s, startup_s, status, and the
     errors with observed rates: ``measure="l2"`` gives ``L2_<field>`` (relative L2 error at the
     method's points at the end: particles for DGMPM/MPM, Gauss points for DGFEM) and
     ``rate_<field>``; ``measure="wg08"`` gives ``Linf_u``, the WG08 displacement error (max over
@@ -123,7 +123,11 @@ def convergence(scene_name, methods, orders, cells, overrides=(), fields=None, p
 
     The runs go through ``executor`` (a `concurrent.futures.Executor`, e.g. from
     `skdgmpm.executor.make_executor`; None runs them here one after the other). Wall times of
-    runs that share a machine include the competition for its cores.
+    runs that share a machine include the competition for its cores. ``wall_s`` leaves out each
+    run's start-up (``startup_s``: the build and the first step, which compiles the kernels or
+    loads them from numba's cache, once per process and method): it is the mean time of the later
+    steps times the number of steps, so the first run of a study is not inflated by a cold cache
+    (a run of one step has no warm step: 0).
     """
     if measure not in MEASURES:
         raise InputError(f"--measure {measure!r}: expected one of {', '.join(MEASURES)}")
@@ -171,7 +175,8 @@ def convergence(scene_name, methods, orders, cells, overrides=(), fields=None, p
         summary, ok = out["summary"], out["summary"]["status"] == "ok"
         row = {"method": v.label, "order": p, "cells": n, "h": float(size[0]) / n, "cfl": c,
                "dt": summary["t_final"] / max(summary["steps"], 1), "dofs": summary["dofs"],
-               "steps": summary["steps"], "wall_s": summary["wall_s"], "status": summary["status"]}
+               "steps": summary["steps"], "wall_s": summary["wall_per_step_s"] * summary["steps"],
+               "startup_s": summary["startup_s"], "status": summary["status"]}
         if measure == "wg08":
             row["Linf_u"] = out["wg08"] if ok else 1.0
         else:

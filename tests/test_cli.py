@@ -90,13 +90,13 @@ def test_run_summary(bar_run):
     _, out = bar_run
     summary = json.loads((out / "summary.json").read_text())
     for key in ("case", "method", "order", "dim", "cells", "particles", "dofs", "steps",
-                "t_end", "wall_s", "errors"):
+                "t_end", "wall_s", "startup_s", "wall_per_step_s", "errors"):
         assert key in summary, key
     assert summary["case"] == "bar_elastic_1d" and summary["method"] == "dgmpm"
     assert summary["status"] == "ok" and "message" not in summary
     assert (summary["dim"], summary["cells"], summary["particles"], summary["order"]) == (1, 30, 30, 1)
     assert summary["dofs"] == 30 * 2 * 2                  # 2 nodes per cell, [F11, p1]
-    assert summary["steps"] > 0 and summary["wall_s"] >= 0
+    assert summary["steps"] > 0 and summary["wall_s"] >= 0 and summary["startup_s"] > 0
     assert summary["t_end"] == pytest.approx(3e-4, rel=1e-9)
     assert summary["errors"]
     for field, norms in summary["errors"].items():
@@ -185,7 +185,7 @@ def test_api_run(tmp_path, monkeypatch):
     assert result.status == "ok" and result.out is None
     text = repr(result)
     assert "\n" not in text and text.startswith("<Result bar_elastic_1d") and "ok" in text
-    assert result.state.t == pytest.approx(1.5e-3, rel=1e-9)
+    assert result.state.t == pytest.approx(result.scene.get("run.t_end"), rel=1e-9)
     assert set(result.errors) and len(result.X) == 20
     assert list(tmp_path.iterdir()) == []                 # no out: nothing written
 
@@ -214,3 +214,51 @@ def test_cli_restores_warning_format(capsys, tmp_path, monkeypatch):
                    "--set", "method.cfl=0.9", "--out", tmp_path / "o", "--quiet")
     assert rc == 0
     assert warnings.formatwarning is before
+
+
+class VirtualClock:
+    """Stands in for time.perf_counter in skdgmpm.run: time passes only in the stepper's steps,
+    10 s for the first step of a stepper (compiling its kernels), 1 s for each later one."""
+
+    def __init__(self, monkeypatch):
+        import skdgmpm.run as run_module
+
+        self.now, real_build = 0.0, run_module.build
+
+        def build(scene):
+            disc = real_build(scene)
+            step = disc.stepper.step
+
+            def timed(state, dt_max=np.inf):
+                self.now += 10.0 if state.step == 0 else 1.0
+                return step(state, dt_max)
+
+            disc.stepper.step = timed
+            return disc
+
+        monkeypatch.setattr(run_module, "build", build)
+        monkeypatch.setattr(run_module, "time", type("T", (), {"perf_counter": lambda: self.now}))
+
+
+def test_wall_time_leaves_out_the_start_up(monkeypatch, tmp_path):
+    """summary.json: startup_s holds the build and the first step (where the kernels compile or
+    load), wall_s the rest of the loop; wall_per_step_s divides by the steps after the first."""
+    clock = VirtualClock(monkeypatch)
+    run("bar_elastic_1d", ["grid.cells=20", "run.t_end=3e-4"], out=tmp_path / "o", progress=False)
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    steps = summary["steps"]
+    assert steps > 2 and clock.now == 10.0 + (steps - 1)
+    assert summary["startup_s"] == 10.0 and summary["wall_s"] == steps - 1
+    assert summary["wall_per_step_s"] == 1.0
+
+
+def test_a_study_times_its_runs_without_start_up(monkeypatch):
+    """Every run of a study pays its own start-up (a fresh stepper, cold in this clock): the rows
+    carry it in startup_s and wall_s is the warm step time times the steps."""
+    from skdgmpm.study import convergence
+
+    VirtualClock(monkeypatch)
+    rows = convergence("bar_elastic_1d", ["dgmpm"], [1], [4, 8], fields=["P11"], progress=False)
+    assert [r["cells"] for r in rows] == [4, 8] and rows[1]["steps"] > rows[0]["steps"] > 2
+    for r in rows:
+        assert r["startup_s"] == 10.0 and r["wall_s"] == r["steps"]

@@ -47,6 +47,18 @@ def test_elastic_bar_one_particle_per_cell_is_exact_at_cfl_1(steps):
     assert abs(r.history["balance"][-1]) < 1e-9 * r.history["external_work"][-1]   # no dissipation
 
 
+def test_shipped_elastic_bar_is_exact_to_round_off():
+    """The scene as shipped (`skdgmpm run bar_elastic_1d`) keeps its promise: t_end is a whole
+    number of CFL-1 steps (190 h / c), so no last step is cut short and every error norm is at
+    round-off (with t_end = 1.5e-3 s, 0.11 step short, L2_rel of P11 was 6.8e-3)."""
+    r = run("bar_elastic_1d", progress=False)
+    assert r.state.step == 190 and r.state.t == pytest.approx(190 * 0.04 / C_BAR, rel=1e-12)
+    assert set(r.errors) == {"P11", "v1", "F11"}
+    for field, norms in r.errors.items():
+        assert norms["L2_rel"] < 1e-11 and norms["L1_rel"] < 1e-11, (field, norms)
+    assert r.fields()["P11"].min() < -1.5e9                    # after the reflection, as described
+
+
 def two_ppc(integrator, cfl, t_end=1.1e-3, frames=200):
     t_end = float(t_end)
     return run("bar_elastic_1d", ["grid.cells=75", "particles.per_cell=2",
