@@ -7,7 +7,7 @@ one, the exact solution. Every key can be overridden (``--set method.cfl=0.5``).
 """
 import copy
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from importlib import resources
 from pathlib import Path
 
@@ -15,7 +15,7 @@ import numpy as np
 
 from . import exact as exact_solutions
 from .errors import InputError
-from .materials import make_material
+from .materials import LAWS, make_material
 
 NUMBER = (int, float)
 # key -> expected type(s); a dict is a sub-table; None is a free-form table checked later
@@ -25,7 +25,8 @@ SCHEMA = {
              "mesh": str},
     "body": {"box": dict, "subdomain": str, "ring": dict},
     "particles": {"per_cell": (int, list), "file": str},
-    "material": {"law": str, "E": NUMBER, "nu": NUMBER, "rho": NUMBER, "a": NUMBER},
+    # the parameters of every registered law (make_material checks which ones a law takes)
+    "material": {"law": str, **{f.name: NUMBER for cls in LAWS.values() for f in fields(cls) if f.init}},
     "regions": list,
     "initial": {"velocity": list, "F": list, "exact": bool, "field": dict},
     "boundaries": None,

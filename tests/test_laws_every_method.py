@@ -49,19 +49,27 @@ def test_mooney_rivlin_at_small_strain_is_linear_elastic(method):
 
 
 # -------------------------------------------------------------------- elastoplastic bar (METHOD §10)
-PLASTIC_BAR = ["grid.cells=60", "run.t_end=4e-4"]     # fronts at c_p t = 1.9 m and c_e t = 2.35 m of 6 m
+CELLS = 240
+PLASTIC_BAR = [f"grid.cells={CELLS}", "run.t_end=8e-4"]     # fronts at c_p t = 3.7 m, c_e t = 4.7 m of 6 m
+PLASTIC_METHODS = {**METHODS, "dgmpm": ['method.name="dgmpm"', "method.cfl=1.0"]}   # DGMPM: the scene's CFL 1
+# relative tolerances (plastic plateau P11 and v1, precursor plateau, eqp plateau), the growth of
+# the energy balance allowed relative to the work done and the front positions (cells); measured
+# at 240 cells (at 480: DG precursor -0.9 %, RK -0.5 %, MPM +1.4 %: they converge), docs/results.md
+TOLERANCE = {"dgmpm": (1e-3, 1e-3, 1e-3, 1e-9, 2), "ader-dgmpm": (1e-3, 2e-2, 5e-3, 1e-9, 2),
+             "ader-dgfem": (1e-3, 2e-2, 5e-3, 1e-9, 2), "rk-dgfem": (1e-3, 1.5e-2, 1e-2, 1e-9, 2),
+             "mpm-cd": (1e-2, 4e-2, 8e-2, 1e-3, 4)}    # MPM-CD does not conserve energy (test_mpm)
 
 
-def plateaus(result, exact):
-    """Median of P11, v1 and eqp over the particles of each exact region, 3 cells away from the
-    fronts, and the positions where P11 crosses the middle of each jump."""
+def plateaus(result, exact, margin=0.15):
+    """Median of P11, v1 and eqp over the particles of each exact region, ``margin`` (m) away from
+    the fronts, and the positions where P11 crosses the middle of each jump."""
     t, X = result.state.t, result.X[:, 0]
     c_p, c_e = exact.speeds
-    h = 6.0 / 60
     f = result.fields()
-    regions = {"plastic": X < c_p * t - 3 * h, "elastic": (X > c_p * t + 3 * h) & (X < c_e * t - 3 * h),
-               "rest": X > c_e * t + 3 * h}
+    regions = {"plastic": X < c_p * t - margin, "elastic": (X > c_p * t + margin) & (X < c_e * t - margin),
+               "rest": X > c_e * t + margin}
     out = {name: {k: float(np.median(f[k][sel])) for k in ("P11", "v1", "eqp")} for name, sel in regions.items()}
+    out["eqp_ahead"] = float(f["eqp"][regions["rest"]].max())
     order = np.argsort(X)
     P = f["P11"][order]
     for name, level in (("front_p", 0.5 * (exact.traction - exact.sigma_HEL)), ("front_e", -0.5 * exact.sigma_HEL)):
@@ -69,26 +77,85 @@ def plateaus(result, exact):
     return out
 
 
-@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("method", PLASTIC_METHODS)
 def test_elastoplastic_bar_two_waves_in_every_method(method, record_property):
     """A compressive step above the Hugoniot elastic limit: the elastic precursor (-sigma_HEL) and
     the plastic wave, with the history at each method's own points, against the exact two-front
-    solution (skdgmpm.exact.ElastoplasticBarStep): plateaus of P11 and v1 within 1 %, eqp within
-    3 %, no plastic strain ahead of the plastic front, both fronts within 2 cells."""
-    r = run("bar_elastoplastic_1d", METHODS[method] + PLASTIC_BAR, progress=False)
+    solution (skdgmpm.exact.ElastoplasticBarStep): plateaus of P11 and v1 behind the plastic front
+    and of the precursor, eqp behind the plastic front, no plastic strain ahead of the precursor,
+    both fronts within 2 cells (MPM 4), plastic work done and an energy balance that does not grow."""
+    r = run("bar_elastoplastic_1d", PLASTIC_METHODS[method] + PLASTIC_BAR, progress=False)
     assert r.status == "ok"
     ex = r.exact
     found = plateaus(r, ex)
     record_property("plateaus", found)
+    plastic, precursor, eqp, balance, cells = TOLERANCE[method]
     behind, between = ex.states[0], ex.states[1]
-    for name, state in (("plastic", behind), ("elastic", between)):
-        assert found[name]["P11"] == pytest.approx(state["P11"], rel=1e-2), name
-        assert found[name]["v1"] == pytest.approx(state["v1"], rel=1e-2), name
-    assert found["plastic"]["eqp"] == pytest.approx(behind["eqp"], rel=3e-2)
-    assert found["elastic"]["eqp"] == found["rest"]["eqp"] == 0.0
+    assert found["plastic"]["P11"] == pytest.approx(behind["P11"], rel=plastic)
+    assert found["plastic"]["v1"] == pytest.approx(behind["v1"], rel=plastic)
+    assert found["elastic"]["P11"] == pytest.approx(between["P11"], rel=precursor)
+    assert found["elastic"]["v1"] == pytest.approx(between["v1"], rel=precursor)
+    assert found["plastic"]["eqp"] == pytest.approx(behind["eqp"], rel=eqp)
+    assert found["eqp_ahead"] == 0.0
     t = r.state.t
-    assert abs(found["front_p"] - ex.c_p * t) < 2 * 0.1
-    assert abs(found["front_e"] - ex.c_e * t) < 2 * 0.1
-    h = r.history                                # plastic work done, the balance never grows
-    assert h["dissipated"][-1] > 0.0
-    assert np.diff(h["balance"]).max() <= 1e-9 * h["external_work"].max()
+    assert abs(found["front_p"] - ex.c_p * t) < cells * 6.0 / CELLS
+    assert abs(found["front_e"] - ex.c_e * t) < cells * 6.0 / CELLS
+    h = r.history
+    assert h["dissipated"][-1] > 0.05 * h["external_work"][-1]
+    assert np.diff(h["balance"]).max() <= balance * h["external_work"].max()
+
+
+T_U, T_RELEASE = 1.5e-4, 1.0e-3          # release time; end time (the precursor at 5.9 m of 6 m)
+RELEASE = [f"grid.cells={CELLS}", f"run.t_end={T_RELEASE!r}", f"bc.left.release={T_U!r}"]
+
+
+@pytest.fixture(scope="module")
+def release_reference():
+    """The release problem on a 10x finer grid by DGMPM at CFL 1 (1 ppc): the reference."""
+    r = run("bar_elastoplastic_1d", ['method.name="dgmpm"', "method.cfl=1.0", f"grid.cells={10 * CELLS}",
+                                     f"run.t_end={T_RELEASE!r}", f"bc.left.release={T_U!r}"], progress=False)
+    assert r.status == "ok"
+    return r
+
+
+def test_elastoplastic_bar_release_reference(release_reference):
+    """What the reference shows, from the physics: the released end keeps the plastic strain of
+    the loading (the exact plateau, 0.1 %; beyond the first 0.2 m, where the step's start-up leaves
+    a 4 % peak) at zero stress (< 1 % of the load), and the elastic
+    unloading wave, faster than the plastic one (it meets it at X = c_p c_e t_u / (c_e - c_p)),
+    has stopped it: no plastic strain where the unreleased plastic front would be (c_p t)."""
+    r = release_reference
+    ex, X, f = r.exact, r.X[:, 0], r.fields()
+    plateau = ex.states[0]["eqp"]
+    meet = ex.c_p * ex.c_e * T_U / (ex.c_e - ex.c_p)
+    near = (X > 0.2) & (X < 0.5 * meet)
+    assert np.allclose(f["eqp"][near], plateau, rtol=1e-3)
+    assert np.abs(f["P11"][X < 1.0]).max() < 1e-2 * abs(ex.traction)
+    assert f["eqp"][X > ex.c_p * r.state.t].max() < 1e-3 * plateau
+    assert f["eqp"][(X > meet) & (X < ex.c_p * r.state.t)].min() < 0.5 * plateau   # it decays beyond
+
+
+@pytest.mark.parametrize("method", PLASTIC_METHODS)
+def test_elastoplastic_bar_release_leaves_residual_plastic_strain(method, release_reference, record_property):
+    """The load removed at t_u: every method's residual eqp profile against the 10x finer DGMPM
+    run (L1, relative) and the end of its plastic zone (where eqp falls below half the plateau).
+    Measured at 240 / 480 / 960 cells against a 4800-cell run: L1 DGMPM 0.12 / 0.078 / 0.044,
+    ADER-DGFEM 0.085 / 0.047 / 0.030, MPM-CD 0.29 / 0.21 / 0.14 (its zone ends 0.39 / 0.23 / 0.14 m
+    short); bounds: the 240-cell values with a margin."""
+    ref = release_reference
+    r = run("bar_elastoplastic_1d", PLASTIC_METHODS[method] + RELEASE, progress=False)
+    assert r.status == "ok"
+    X, eqp = r.X[:, 0], r.fields()["eqp"]
+    order = np.argsort(ref.X[:, 0])
+    eqp_ref = np.interp(X, ref.X[order, 0], ref.fields()["eqp"][order])
+    l1 = np.sum(np.abs(eqp - eqp_ref)) / np.sum(np.abs(eqp_ref))
+    half = 0.5 * eqp_ref.max()
+    end, end_ref = X[eqp > half].max(), ref.X[ref.fields()["eqp"] > half, 0].max()
+    record_property("release", {"L1_rel_eqp": l1, "end": end, "end_ref": end_ref})
+    l1_bound, end_bound = RELEASE_BOUNDS[method]
+    assert l1 < l1_bound
+    assert abs(end - end_ref) < end_bound
+
+
+RELEASE_BOUNDS = {"dgmpm": (0.15, 0.125), "ader-dgmpm": (0.1, 0.125), "ader-dgfem": (0.1, 0.125),
+                  "rk-dgfem": (0.1, 0.125), "mpm-cd": (0.35, 0.45)}     # (L1 of eqp, end of the zone in m)
