@@ -232,7 +232,7 @@ def main(argv=None):
 
     p = sub.add_parser("compare-figures", help="sigma11 maps and bottom-line plots of several methods (PNG, CSV)")
     p.add_argument("scene", help="scene name or path, e.g. multiholed_cell_2d")
-    p.add_argument("--groups", default="S1,S2,dgmpm", help="S1 (S1T1 methods), S2 (S2T2), dgmpm")
+    p.add_argument("--groups", default="S1,S2,dgmpm", help="S1 (S1T1 methods), S2 (S2T2), dgmpm, mpm (CD-cpGIMP)")
     p.add_argument("--dgmpm-cfl", type=float, default=0.5, help="CFL of first-order DGMPM (CTU, 1 ppc)")
     p.add_argument("--workers", type=int, default=None, help="parallel processes (default: all cores; 1: serial)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override a scene key")

@@ -33,7 +33,9 @@ S2 = {
 }
 DGMPM = {"dgmpm": ['method.name="dgmpm"', 'method.integrator="euler"', 'method.transverse="ctu"',
                    "particles.per_cell=1"]}
-GROUPS = {"S1": S1, "S2": S2, "dgmpm": DGMPM}
+MPM = {"mpm cd-cpgimp": ['method.name="mpm"', 'method.update="cd"', 'method.shape="cpgimp"', "method.cfl=0.4",
+                         "particles.per_cell=2"]}
+GROUPS = {"S1": S1, "S2": S2, "dgmpm": DGMPM, "mpm": MPM}
 FIELDS = ("sigma11", "v1")
 
 
@@ -153,7 +155,10 @@ def write(snaps, out, scene_name, map_fields=("sigma11",)):
         for ax, s in zip(axes[0], group):
             for e in s.outline:
                 ax.plot(e[:, 0], e[:, 1], "-", color="0.6", lw=0.6)
-            sc = ax.scatter(s.x[:, 0], s.x[:, 1], c=s.fields[field], s=4, cmap="coolwarm", vmin=-lim, vmax=lim)
+            if values.min() >= 0:           # eqp and other fields that grow from zero: sequential
+                sc = ax.scatter(s.x[:, 0], s.x[:, 1], c=s.fields[field], s=4, cmap="viridis", vmin=0, vmax=lim)
+            else:
+                sc = ax.scatter(s.x[:, 0], s.x[:, 1], c=s.fields[field], s=4, cmap="coolwarm", vmin=-lim, vmax=lim)
             ax.set_aspect("equal")
             ax.set_title(f"{s.method}\n{s.status}", fontsize=8)
             ax.tick_params(labelsize=6)
@@ -161,7 +166,8 @@ def write(snaps, out, scene_name, map_fields=("sigma11",)):
         fig.suptitle(f"{scene_name}: {field}, current configuration, t = {t:.4g} s", fontsize=9)
         fig.savefig(out / f"map_{field}_t{t:.4g}.png", dpi=110)
         plt.close(fig)
-    for field in FIELDS:
+    plastic = all("eqp" in s.fields for s in snaps)
+    for field in FIELDS + (("eqp",) if plastic else ()):
         fig, axes = plt.subplots(1, len(by_time), figsize=(5 * len(by_time), 3.5), squeeze=False)
         for ax, (t, group) in zip(axes[0], sorted(by_time.items())):
             for s in group:
@@ -169,7 +175,7 @@ def write(snaps, out, scene_name, map_fields=("sigma11",)):
                 ax.plot(x1, vals[field], "-", lw=1, label=s.method)
             ax.set_title(f"t = {t:.4g} s", fontsize=9)
             ax.set_xlabel("x1 (m), bottom line")
-            ax.set_ylabel(f"{field} ({'Pa' if field.startswith('sigma') else 'm/s'})")
+            ax.set_ylabel(field_label(field))
             ax.legend(fontsize=6)
         fig.suptitle(f"{scene_name}: {field} along the bottom line", fontsize=9)
         fig.tight_layout()

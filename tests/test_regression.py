@@ -26,6 +26,9 @@ ADER_DGMPM_P2 = ['method.name="ader-dgmpm"', "method.order=2", "particles.per_ce
 
 CASES = {
     "bar_elastic_1d/dgmpm-euler": ("bar_elastic_1d", []),
+    "bar_elastoplastic_1d/dgmpm": ("bar_elastoplastic_1d", []),          # history at the particles
+    "bar_elastoplastic_1d/rk-dgfem-2": ("bar_elastoplastic_1d", ['method.name="rk-dgfem"', "method.order=2",
+                                                                 'method.integrator="rk2"', "grid.cells=20"]),
     "bar_elastic_1d/dgmpm-rk2": ("bar_elastic_1d", ["particles.per_cell=2", 'method.integrator="rk2"']),
     "bar_elastic_1d/rk-dgfem-2": ("bar_elastic_1d", ['method.name="rk-dgfem"', "method.order=2",
                                                      'method.integrator="rk4"', "method.cfl=0.5"]),
