@@ -4,14 +4,30 @@ import json
 import sys
 import warnings
 
-from .errors import InputError
+from .errors import InputError, OutputError
+
+
+# exit statuses of `skdgmpm run` (sysexits.h names where one fits)
+EXIT_INPUT = 2           # bad input: one line naming file, key and value; nothing written
+EXIT_UNSTABLE = 3        # a health stop: the last good state kept
+EXIT_OUTPUT = 74         # EX_IOERR: the outputs could not be written (full disk, ...); what was written kept
+EXIT_INTERRUPTED = 75    # EX_TEMPFAIL: stopped by SIGINT or SIGTERM after a checkpoint; --resume goes on
 
 
 def _cmd_run(args):
     from .run import run
 
-    out = args.out if args.out is not None else f"runs/{_stem(args.case)}"
-    result = run(args.case, overrides=args.set, out=out, force=args.force, progress=not args.quiet)
+    if args.resume is not None:
+        if args.case is not None or args.set or args.force:
+            raise InputError(f"--resume {args.resume}: give no scene, --set or --force: the run goes on with "
+                             "the scene it started with")
+        out = args.resume
+        result = run(resume=args.resume, out=args.out, progress=not args.quiet)
+    else:
+        if args.case is None:
+            raise InputError("run: give a scene (a name from 'skdgmpm list' or a .toml path), or --resume DIR")
+        out = args.out if args.out is not None else f"runs/{_stem(args.case)}"
+        result = run(args.case, overrides=args.set, out=out, force=args.force, progress=not args.quiet)
     summary = result.summary()
     print(f"{summary['case']}: {summary['status']}, {summary['steps']} steps to t = "
           f"{summary['t_final']:.6g} s in {summary['wall_s']:.2f} s (+ {summary['startup_s']:.2f} s start-up) "
@@ -19,9 +35,12 @@ def _cmd_run(args):
     for name, norms in summary.get("errors", {}).items():
         print(f"  {name:>6}: L1_rel {norms['L1_rel']:.3e}  L2_rel {norms['L2_rel']:.3e}  "
               f"Linf {norms['Linf']:.3e}")
+    if result.status == "interrupted":
+        print(result.message, file=sys.stderr)
+        return EXIT_INTERRUPTED
     if result.status != "ok":
         print(f"error: {result.message}; last good state kept in {out}", file=sys.stderr)
-        return 3
+        return EXIT_UNSTABLE
     return 0
 
 
@@ -168,7 +187,10 @@ def main(argv=None):
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("run", help="run a scene")
-    p.add_argument("case", help="scene name from cases/ (see 'skdgmpm list') or path to a .toml")
+    p.add_argument("case", nargs="?", default=None,
+                   help="scene name from cases/ (see 'skdgmpm list') or path to a .toml")
+    p.add_argument("--resume", default=None, metavar="DIR",
+                   help="continue the run checkpointed in DIR (stopped by SIGINT/SIGTERM, or killed)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene key, e.g. --set method.cfl=0.5 (repeatable)")
     _output_options(p, "runs/CASE")
@@ -256,7 +278,14 @@ def main(argv=None):
             return args.func(args)
         except InputError as exc:
             print(f"error: {exc}", file=sys.stderr)
-            return 2
+            return EXIT_INPUT
+        except OutputError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return EXIT_OUTPUT
+        except KeyboardInterrupt:
+            print("error: interrupted (before the first step, or a second Ctrl-C: no new checkpoint)",
+                  file=sys.stderr)
+            return 130
         finally:
             warnings.formatwarning = formatwarning      # main() may be called from Python
 

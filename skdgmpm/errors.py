@@ -13,3 +13,7 @@ class InstabilityError(RuntimeError):
         self.step = step
         self.time = time
         self.particle = particle
+
+
+class OutputError(RuntimeError):
+    """Writing the outputs failed (a full disk, ...): the message says what and what was kept."""

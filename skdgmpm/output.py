@@ -100,3 +100,18 @@ def write_energy(path, history):
 
 def write_summary(path, summary):
     Path(path).write_text(json.dumps(summary, indent=2, default=float) + "\n")
+
+
+def read_frame(path, stepper, t, step):
+    """The `ParticleState` (without grid dofs) of a frame written by `write_particles`, exactly:
+    VTU keeps the float64 arrays as written. A resumed run's `Result.frames` come from here."""
+    from .scheme import ParticleState
+
+    mesh = meshio.read(path)
+    d, n, data = stepper.d, len(mesh.points), mesh.point_data
+    block = lambda name: np.asarray(data[name]).reshape(n, 3, 3)[:, :d, :d]      # noqa: E731
+    U = system.join(block("F"), np.asarray(data["momentum"])[:, :d])
+    Q = system.join(block("P"), np.asarray(data["velocity"])[:, :d])
+    names = stepper.materials.history_names if stepper.materials.n_history else ()
+    history = np.column_stack([data[k] for k in names]) if names else np.zeros((n, 0))
+    return ParticleState(float(t), U, Q, np.ascontiguousarray(mesh.points[:, :d]), int(step), history=history)

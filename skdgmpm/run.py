@@ -1,7 +1,8 @@
 """Run a scene: time loop with progress, energy history, error norms, outputs on disk."""
 import functools
-import shutil
+import signal
 import sys
+import threading
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -9,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from . import output
+from . import checkpoint, guards, outdir, output
 from .build import build
-from .errors import InputError, InstabilityError
+from .errors import InputError, InstabilityError, OutputError
 from .exact import error_norms
 from .scene import Scene, exact_solution, load_scene
 
@@ -23,20 +24,25 @@ def _critical_cfl(layout, integrator):
 
 
 def check_cfl(disc):
-    """Warn when the CFL exceeds the von Neumann limit of the particle layout (R18 §6).
-
-    The 1D analysis applies per direction; in 2D it is an upper bound (DCU needs less).
-    Returns the limit, or None where the layout is not a regular per-cell layout.
-    """
-    if disc.layout is None:
+    """Refuse a CFL above the method's known stability limit (`skdgmpm.guards`): for DGMPM the
+    von Neumann limit of the particle layout (R18 §6; the 1D analysis applies per direction, in 2D
+    an upper bound, DCU needs less), for MPM 1. With ``method.cfl_above_limit = true`` a warning
+    only. Returns the limit, or None where none is known (DGFEM, ADER, a particle file)."""
+    stepper, scene = disc.stepper, disc.scene
+    if scene.data["method"].get("name", "dgmpm") == "mpm":
+        limit, what = guards.mpm_limit(disc), "the MPM limit 1 (a wave or a particle crosses at most one cell a step)"
+    elif disc.layout is not None:
+        coords = tuple(float(c) for c in np.unique(np.round(disc.layout[:, 0], 12)))
+        limit = _critical_cfl(coords, stepper.integrator)
+        what = (f"the von Neumann limit {limit:.2f} of layout {list(coords)} with {stepper.integrator} "
+                f"(skdgmpm stability --layout ...)")
+    else:
         return None
-    stepper = disc.stepper
-    coords = tuple(float(c) for c in np.unique(np.round(disc.layout[:, 0], 12)))
-    limit = _critical_cfl(coords, stepper.integrator)
     if stepper.cfl > limit + 1e-6:
-        warnings.warn(f"{disc.scene.where('method.cfl')} = {stepper.cfl} exceeds the von Neumann "
-                      f"limit {limit:.2f} of layout {list(coords)} with {stepper.integrator} "
-                      f"(skdgmpm stability --layout ...)", stacklevel=3)
+        text = f"{scene.where('method.cfl')} = {stepper.cfl} exceeds {what}"
+        if not guards.allowed_above_limit(scene):
+            raise InputError(f"{text}: the run would be unstable (method.cfl_above_limit = true runs it anyway)")
+        warnings.warn(text, stacklevel=3)
     return limit
 
 
@@ -143,64 +149,121 @@ def compute_errors(disc, state, solution):
             for k in exact if k in fields}
 
 
-def run(scene, overrides=(), out=None, force=False, progress=True, frames=None, max_steps=None,
-        on_step=None):
+def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=None, max_steps=None,
+        on_step=None, resume=None, signals=None):
     """Run ``scene`` (a `Scene`, a name or a path). Writes outputs to ``out`` if given.
     ``max_steps`` stops the run early (benchmarks); ``on_step(state, disc)`` is called with the initial
     state and after every step (error measures over the whole run, e.g. WG08's).
 
-    Output is written to ``<out>.partial`` and renamed at the end, so a failed start leaves
-    nothing behind; an existing non-empty ``out`` is an error unless ``force``.
+    Outputs go straight into ``out``, locked against other runs and consistent at every moment
+    (`skdgmpm.outdir`); an existing non-empty ``out`` is an error unless ``force``, and input
+    errors are raised before anything is written. With ``out``, a checkpoint is written every
+    ``run.checkpoint_every`` (`skdgmpm.checkpoint`) and, when ``signals`` (default: with ``out``, in
+    the main thread), on SIGINT or SIGTERM, after which the run returns with status "interrupted".
+    ``resume=DIR`` continues the run checkpointed in DIR (no scene or overrides: the run goes on
+    with the scene it started with), its outputs bit-identical to an uninterrupted run's.
     """
-    if not isinstance(scene, Scene):
+    saved = None
+    if resume is not None:
+        if scene is not None or overrides:
+            raise InputError("--resume: give no scene and no --set: the run goes on with the scene it started with")
+        if out is not None and Path(out).resolve() != Path(resume).resolve():
+            raise InputError(f"--resume {resume} writes into {resume}, not --out {out}")
+        out = Path(resume)
+        outdir.check(out, resume=True)
+        saved = checkpoint.read(out)
+        scene = Scene.from_dict(saved.scene_data, saved.scene_name,
+                                Path(saved.scene_path) if saved.scene_path else None)
+        n_frames = saved.n_frames
+    elif scene is None:
+        raise InputError("no scene given (a name from 'skdgmpm list' or a .toml path), nor --resume DIR")
+    elif not isinstance(scene, Scene):
         scene = load_scene(scene, overrides)
     elif overrides:
         scene = scene.with_overrides(overrides)
     t_end = scene.get("run.t_end")
     if not (isinstance(t_end, (int, float)) and not isinstance(t_end, bool) and 0 < t_end < np.inf):
         raise InputError(f"{scene.where('run.t_end')} = {t_end!r} must be a time > 0 (s)")
-    n_frames = int(frames) if frames is not None else scene.get("run.frames", 20)
-    if not (isinstance(n_frames, int) and not isinstance(n_frames, bool) and n_frames >= 1):
-        raise InputError(f"{scene.where('run.frames')} = {n_frames!r} must be an integer >= 1")
+    if saved is None:
+        n_frames = int(frames) if frames is not None else scene.get("run.frames", 20)
+        if not (isinstance(n_frames, int) and not isinstance(n_frames, bool) and n_frames >= 1):
+            raise InputError(f"{scene.where('run.frames')} = {n_frames!r} must be an integer >= 1")
+    every = checkpoint.parse_every(scene)
+    guards.step_limit(scene)
     if out is not None:
         out = Path(out)
-        if out.exists() and not out.is_dir():
-            raise InputError(f"--out {out}: exists and is not a directory")
-        if out.exists() and any(out.iterdir()) and not force:
-            raise InputError(f"--out {out}: directory exists and is not empty (use --force to replace it)")
+        outdir.check(out, force, resume=saved is not None)
     begin = time.perf_counter()
     disc = build(scene)
     solution = exact_solution(scene)
     check_cfl(disc)
+    guards.check_step_count(disc, t_end)
     stepper, state = disc.stepper, disc.initial
+    if saved is not None:
+        state = saved.state
+        checkpoint.restore_stepper(stepper, saved.stepper)
 
-    partial = None
-    if out is not None:
-        partial = out.with_name(out.name + ".partial")
-        shutil.rmtree(partial, ignore_errors=True)
-        partial.mkdir(parents=True)
+    folder = None if out is None else outdir.OutputFolder(out).acquire(force, resume=saved is not None)
+    if signals is None:
+        signals = out is not None and threading.current_thread() is threading.main_thread()
     try:
-        return _run(scene, disc, solution, stepper, state, t_end, n_frames, out, partial, progress, max_steps,
-                    on_step, begin)
-    except BaseException:                 # crash or Ctrl-C: leave no half-written output behind
-        if partial is not None:
-            shutil.rmtree(partial, ignore_errors=True)
-        raise
+        return _run(scene, disc, solution, stepper, state, t_end, n_frames, out, progress, max_steps,
+                    on_step, begin, saved=saved, every=every, signals=signals)
+    finally:
+        if folder is not None:
+            folder.release()
 
 
-def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, partial, progress, max_steps=None,
-         on_step=None, begin=None):
+def resume(folder, progress=True, signals=None):
+    """Continue the run checkpointed in ``folder`` (what ``skdgmpm run --resume DIR`` does)."""
+    return run(resume=folder, progress=progress, signals=signals)
+
+
+class _Signals:
+    """Within the block, SIGINT and SIGTERM only set ``caught`` (the loop then checkpoints and
+    stops); a second SIGINT raises KeyboardInterrupt at once. Outside the main thread: nothing."""
+
+    NAMES = {signal.SIGINT: "SIGINT", signal.SIGTERM: "SIGTERM"}
+
+    def __init__(self, enabled):
+        self.enabled, self.caught, self.old = enabled, None, {}
+
+    def _handler(self, signum, frame):
+        if self.caught == signal.SIGINT and signum == signal.SIGINT:
+            raise KeyboardInterrupt
+        self.caught = signum
+
+    def __enter__(self):
+        if self.enabled:
+            self.old = {s: signal.signal(s, self._handler) for s in self.NAMES}
+        return self
+
+    def __exit__(self, *exc):
+        for s, handler in self.old.items():
+            signal.signal(s, handler)
+
+
+HISTORY = ("step", "t", "kinetic", "stored", "dissipated", "total", "external_work", "balance", "min_J",
+           "min_acoustic")
+
+
+def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, progress, max_steps=None,
+         on_step=None, begin=None, saved=None, every=None, signals=False):
     """The time loop. Timing: ``startup_s`` runs from ``begin`` (before the build) to the end of the
     first step, which compiles the kernels or loads them from numba's cache; ``wall_s`` is the
     rest of the loop, so timings compare methods and grids whatever the state of the cache."""
-    if partial is not None:
-        output.write_grid(partial / "grid.vtu", disc.grid)
+    writer = None if out is None else outdir.RunWriter(out, stepper)
+    if saved is None:
+        history = {k: [] for k in HISTORY}
+        entries, next_frame, frame_list = [], 1, []
+    else:
+        history, entries, next_frame = saved.history, list(saved.entries), saved.next_frame
+        frame_list = [output.read_frame(out / name, stepper, t, step) for t, name, step in entries]
+    energy_guard = guards.EnergyGuard(stepper, history)
+    step_guard = guards.StepGuard(scene, None if saved is None else saved.dt0)
 
-    history = {k: [] for k in ("step", "t", "kinetic", "stored", "dissipated", "total", "external_work",
-                               "balance", "min_J", "min_acoustic")}
-
-    def record(st):
-        kin, sto, dis = stepper.energy(st)
+    def record(st, energies=None):
+        kin, sto, dis = stepper.energy(st) if energies is None else energies
         total = kin + sto + dis
         for k, v in zip(history, (st.step, st.t, kin, sto, dis, total, stepper.external_work,
                                   total - stepper.external_work)):
@@ -209,75 +272,124 @@ def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, partial, p
         history["min_J"].append(health.get("min_J", np.nan))
         history["min_acoustic"].append(health.get("min_acoustic", np.nan))
 
-    frame_list, entries = [], []
-
     def snapshot(st):
         frame_list.append(st.copy())
-        if partial is not None:
-            name = f"particles_{len(entries):04d}.vtu"
-            output.write_particles(partial / name, stepper, st)
-            entries.append((st.t, name))
+        if writer is not None:
+            entries.append((st.t, writer.frame(len(entries), st), st.step))
 
-    record(state)
-    snapshot(state)
-    if on_step is not None:
+    def make_result(status, message, errors=None, wall=0.0, startup=0.0):
+        return Result(scene, disc, state, {k: np.asarray(v) for k, v in history.items()}, frame_list,
+                      errors or {}, wall, status, message, out, solution, startup)
+
+    def publish(status="running", message="", errors=None, wall=0.0, startup=0.0):
+        if writer is not None:
+            writer.publish(entries, history, make_result(status, message, errors, wall, startup).summary())
+
+    def save_checkpoint(wall, startup):
+        writer.checkpoint(lambda: checkpoint.write(out, scene, state, stepper, history, entries, next_frame,
+                                                   n_frames, wall, startup, step_guard.dt0), state.step)
+
+    wall0 = 0.0 if saved is None else saved.wall_s
+    startup0 = 0.0 if saved is None else saved.startup_s
+    if saved is None:
+        if writer is not None:
+            writer.grid(disc.grid)
+        record(state)
+        energy_guard.check(state, history["total"][-1], stepper.external_work)
+        snapshot(state)
+        publish()
+    if on_step is not None and saved is None:
         on_step(state, disc)
-    next_frame = 1
-    status, message = "ok", ""
+    status, message, stopped = "ok", "", None
+    schedule = checkpoint.Schedule(every, state.step) if writer is not None else None
     bar = _progress(t_end, scene.name, progress)
+    if saved is not None:
+        bar.update(state.t)
     start, warm = time.perf_counter(), None
+
+    def timing(now):
+        w = now if warm is None else warm
+        return wall0 + now - w, startup0 + w - (start if begin is None else begin)
+
     try:
-        while state.t < t_end * (1 - 1e-12) and (max_steps is None or state.step < max_steps):
-            new = stepper.step(state, t_end - state.t)
-            bar.update(new.t - state.t)
-            state = new
-            record(state)
-            if on_step is not None:
-                on_step(state, disc)
-            if state.t >= next_frame * t_end / max(n_frames, 1) * (1 - 1e-12):
-                snapshot(state)
-                while next_frame * t_end / max(n_frames, 1) <= state.t * (1 + 1e-12):
-                    next_frame += 1
-            if warm is None:                      # the first step done: the kernels are compiled
-                warm = time.perf_counter()
-    except InstabilityError as exc:
-        status, message = "unstable", str(exc)
-        if exc.step is None:              # raised on a face (Riemann solver), not on a particle
-            message += f" during step {state.step + 1} (from t = {state.t:.6g} s)"
-        if frame_list[-1].step != state.step:
-            snapshot(state)                       # the last good state
-    finally:
-        bar.close()
-    end = time.perf_counter()
-    warm = end if warm is None else warm
-    wall, startup = end - warm, warm - (start if begin is None else begin)
-    history = {k: np.asarray(v) for k, v in history.items()}
-    result = Result(scene, disc, state, history, frame_list,
-                    compute_errors(disc, state, solution), wall, status, message, out, solution, startup)
-    if partial is not None:
-        output.write_pvd(partial / "particles.pvd", entries)
-        output.write_energy(partial / "energy.csv", history)
-        output.write_summary(partial / "summary.json", result.summary())
-        _plots(result, partial)
-        if out.exists():
-            shutil.rmtree(out)
-        partial.rename(out)
+        with _Signals(signals) as caught:
+            try:
+                while state.t < t_end * (1 - 1e-12) and (max_steps is None or state.step < max_steps):
+                    new = stepper.step(state, t_end - state.t)
+                    energies = stepper.energy(new)
+                    step_guard.check(state, new, t_end)
+                    energy_guard.check(new, sum(energies), stepper.external_work)
+                    bar.update(new.t - state.t)
+                    state = new
+                    record(state, energies)
+                    if on_step is not None:
+                        on_step(state, disc)
+                    if state.t >= next_frame * t_end / max(n_frames, 1) * (1 - 1e-12):
+                        snapshot(state)
+                        while next_frame * t_end / max(n_frames, 1) <= state.t * (1 + 1e-12):
+                            next_frame += 1
+                        publish()
+                    if warm is None:                      # the first step done: the kernels are compiled
+                        warm = time.perf_counter()
+                    if caught.caught is not None:
+                        stopped = caught.NAMES[caught.caught]
+                        break
+                    if schedule is not None and schedule.due(state.step):
+                        save_checkpoint(*timing(time.perf_counter()))
+                        publish()
+                        schedule.done(state.step)
+            except InstabilityError as exc:
+                status, message = "unstable", str(exc)
+                if exc.step is None:              # raised on a face (Riemann solver), not on a particle
+                    message += f" during step {state.step + 1} (from t = {state.t:.6g} s)"
+                if frame_list[-1].step != state.step:
+                    snapshot(state)                       # the last good state
+            finally:
+                bar.close()
+            end = time.perf_counter()
+            wall, startup = timing(end)
+            if stopped is not None:
+                status = "interrupted"
+                message = f"stopped by {stopped} at step {state.step}, t = {state.t:.6g} s of {t_end:.6g} s"
+                if writer is not None:
+                    save_checkpoint(wall, startup)
+                    message += f"; checkpoint written, resume with: skdgmpm run --resume {out}"
+            result = make_result(status, message, compute_errors(disc, state, solution) if status != "interrupted"
+                                 else {}, wall, startup)
+            if writer is not None:
+                writer.publish(entries, history, result.summary())
+                if status != "interrupted":
+                    writer.plots(result)
+                if status == "ok":
+                    writer.remove_checkpoint()
+    except outdir.WriteFailed as exc:
+        raise writer.error(exc) from None
+    except BaseException as exc:          # a bug, a second Ctrl-C: what is on disk stays consistent
+        if writer is not None and not isinstance(exc, OutputError):
+            try:
+                publish("failed", f"{type(exc).__name__}: {exc}")
+            except Exception:
+                pass
+        raise
     return result
 
 
-def _plots(result, folder):
+def _plots(result, folder, atomic=None):
+    """energy.png, profile.png and eqp.png (a law with plastic flow) into ``folder``; each written
+    through ``atomic(path, write)`` if given (`outdir.atomic_write`: never half a PNG)."""
     try:
         from . import plots
     except ImportError:          # matplotlib missing: files are still complete
         return
-    plots.energy(result, folder / "energy.png")
+    atomic = atomic or (lambda path, write: write(path))
+    atomic(folder / "energy.png", lambda p: plots.energy(result, p))
     if result.scene.dim == 1 or result.exact is not None:
-        plots.profile(result, folder / "profile.png")
+        atomic(folder / "profile.png", lambda p: plots.profile(result, p))
     if "eqp" in result.fields():                # a law with plastic flow: where it flowed
         if result.scene.dim == 1:
-            plots.profile(result, folder / "eqp.png", field="eqp")
+            atomic(folder / "eqp.png", lambda p: plots.profile(result, p, field="eqp"))
         else:
-            plots.field_map(result, "eqp", folder / "eqp.png")
+            atomic(folder / "eqp.png", lambda p: plots.field_map(result, "eqp", p))
 
 
 class _NoBar:

@@ -82,7 +82,8 @@ def trial(scene, overrides, cfl, allowed_growth=ENERGY_GROWTH, max_steps=None):
     try:
         with warnings.catch_warnings():          # CFL above the 1D von Neumann limit: the point here
             warnings.simplefilter("ignore")
-            r = run(scene, [*overrides, f"method.cfl={cfl!r}"], progress=False, frames=1, max_steps=max_steps)
+            r = run(scene, [*overrides, f"method.cfl={cfl!r}", "method.cfl_above_limit=true"], progress=False,
+                    frames=1, max_steps=max_steps)
     except InstabilityError as exc:      # raised before the loop (e.g. the first CTU step)
         return Trial(cfl, False, "unstable", str(exc), 0, 0.0, time.perf_counter() - start)
     h = r.history

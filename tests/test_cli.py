@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from skdgmpm.cli import main
+from skdgmpm.errors import InputError
 from skdgmpm.run import Result, run
 
 CASES = Path(str(resources.files("skdgmpm.cases")))
@@ -190,11 +191,13 @@ def test_api_run(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []                 # no out: nothing written
 
 
-def test_cfl_above_von_neumann_limit_warns(tmp_path, monkeypatch):
+def test_cfl_above_von_neumann_limit_is_refused_or_warned_with_the_key(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     tiny = ["grid.cells=20", "run.t_end=1e-4", "particles.per_cell=2"]
-    with pytest.warns(UserWarning, match="von Neumann") as record:
+    with pytest.raises(InputError, match=r"method.cfl = 0.9 exceeds the von Neumann limit 0.69"):
         run("bar_elastic_1d", overrides=tiny + ["method.cfl=0.9"], progress=False)
+    with pytest.warns(UserWarning, match="von Neumann") as record:
+        run("bar_elastic_1d", overrides=tiny + ["method.cfl=0.9", "method.cfl_above_limit=true"], progress=False)
     message = str([w for w in record if "von Neumann" in str(w.message)][0].message)
     assert "method.cfl = 0.9" in message and "0.69" in message and "\n" not in message
 
@@ -211,7 +214,7 @@ def test_cli_restores_warning_format(capsys, tmp_path, monkeypatch):
     before = warnings.formatwarning
     rc, _, _ = cli(capsys, "run", "bar_elastic_1d", "--set", "grid.cells=20",
                    "--set", "run.t_end=1e-4", "--set", "particles.per_cell=2",
-                   "--set", "method.cfl=0.9", "--out", tmp_path / "o", "--quiet")
+                   "--set", "method.cfl=0.9", "--set", "method.cfl_above_limit=true", "--out", tmp_path / "o", "--quiet")
     assert rc == 0
     assert warnings.formatwarning is before
 

@@ -1,0 +1,116 @@
+"""Run guards that catch garbage the per-point health checks (`skdgmpm.health`) cannot see.
+
+The per-point checks stop on non-finite values, J <= 0 and lost hyperbolicity. An unstable scheme
+can run for a long time before any of those happens, with a stress many times the load; these
+guards stop it earlier (exit 3, like the other health stops), or refuse it before it starts:
+
+- **Energy created** (`EnergyGuard`): the energy balance (total energy minus the work of the
+  boundaries and body forces) of a stable, consistent scheme stays level or falls (upwind fluxes
+  and plastic flow dissipate); its discretisation error is a fraction of the energy actually in
+  play. The run stops when the balance has grown by more than ``MARGIN`` = 1 times all the energy
+  put in so far, E_avail = E_total(0) + max_t |W(t)|: a run that has created more energy than
+  was ever given to it is unstable, whatever its resolution. (The CFL-limit study,
+  `skdgmpm.stability_study`, already fails a trial at 0.1 of the energy scale; stable runs of
+  every shipped scene stay far below 1.) Below an absolute floor, the energy of a uniform strain
+  of about 1e-6 (1e-12 sum_p V_p E_p), round-off of a body nearly at rest is not taken for growth.
+- **Time-step collapse** (`StepGuard`): Delta t below ``COLLAPSE`` = 1/1000 of the first step's
+  (the final step, cut to reach t_end, aside) means the fastest wave became 1000 times faster,
+  a stiffness 1e6 times the initial: no law of skdgmpm does that in a sound run, and the run
+  would never end. Up front, a run whose first Delta t would need more than ``run.step_limit``
+  (default 1e7) steps to reach t_end is refused (E = 1e300 or rho = 1e-300 make Delta t ~ 0);
+  reaching the limit during the run stops it.
+- **CFL above a known stability limit** (`stability_limit`): refused (exit 2) unless the scene sets
+  ``method.cfl_above_limit = true``. Known limits: first-order DGMPM, the von Neumann limit of
+  the particle layout (R18 §6, `skdgmpm.stability`; in 2D an upper bound, DCU needs less); MPM,
+  1 (dt = h / (c + |v|)). The DGFEM and ADER steps are already scaled by 1 / (2P + 1), and the scene
+  admits CFL <= 2 for them.
+"""
+import numpy as np
+
+from .errors import InputError, InstabilityError
+
+MARGIN = 1.0
+COLLAPSE = 1e-3
+STEP_LIMIT = 10_000_000
+
+
+class EnergyGuard:
+    """Stops a run whose energy balance grows by more than MARGIN times the energy put in."""
+
+    def __init__(self, stepper, history):
+        p, mats = stepper.particles, stepper.materials.materials
+        E = np.array([getattr(m, "E", 0.0) or 0.0 for m in mats])[np.asarray(p.material)]
+        self.floor = 1e-12 * float(np.sum(p.volume * E))
+        self.total0 = float(history["total"][0]) if history["total"] else None
+        self.balance0 = float(history["balance"][0]) if history["balance"] else None
+        self.work_max = max((abs(float(w)) for w in history["external_work"]), default=0.0)
+
+    def check(self, state, total, work):
+        """After the step to ``state``: total energy ``total`` and boundary work ``work`` so far."""
+        if self.total0 is None:               # the initial state
+            self.total0, self.balance0 = total, total - work
+        self.work_max = max(self.work_max, abs(work))
+        growth = (total - work) - self.balance0
+        available = abs(self.total0) + self.work_max
+        if growth > MARGIN * available + self.floor:
+            raise InstabilityError(
+                f"energy created at step {state.step}, t = {state.t:.6g} s: the energy balance grew by "
+                f"{growth:.4g} J, more than all the energy put in ({available:.4g} J: initial energy + "
+                f"work of the loads): the scheme is unstable (lower method.cfl)", step=state.step, time=state.t)
+
+
+class StepGuard:
+    """Stops a run whose time step collapses, or that reaches ``run.step_limit`` steps."""
+
+    def __init__(self, scene, dt0=None):
+        self.dt0 = dt0
+        self.limit = step_limit(scene)
+
+    def check(self, old, new, t_end):
+        dt = new.t - old.t
+        if self.dt0 is None:
+            self.dt0 = dt
+            return
+        last = new.t >= t_end * (1 - 1e-12)                # cut short to reach t_end
+        if not last and dt < COLLAPSE * self.dt0:
+            raise InstabilityError(
+                f"time step collapsed at step {new.step}, t = {new.t:.6g} s: Delta t = {dt:.4g} s, below "
+                f"{COLLAPSE:g} of the first step's {self.dt0:.4g} s (the fastest wave became "
+                f"{self.dt0 / dt:.3g} times faster)", step=new.step, time=new.t)
+        if new.step >= self.limit and not last:
+            raise InstabilityError(
+                f"step limit reached at step {new.step}, t = {new.t:.6g} s of t_end = {t_end:.6g} s "
+                f"(run.step_limit = {self.limit})", step=new.step, time=new.t)
+
+
+def step_limit(scene):
+    value = scene.get("run.step_limit", STEP_LIMIT)
+    if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+        raise InputError(f"{scene.where('run.step_limit')} = {value!r} must be an integer >= 1")
+    return value
+
+
+def check_step_count(disc, t_end):
+    """Refuse a run whose first Delta t would need more than ``run.step_limit`` steps."""
+    scene, stepper = disc.scene, disc.stepper
+    limit = step_limit(scene)
+    dt = stepper.time_step(disc.initial)
+    with np.errstate(divide="ignore", over="ignore"):
+        steps = t_end / dt if dt > 0 else np.inf
+    if not (np.isfinite(dt) and dt > 0) or steps > limit:
+        c = float(np.max(disc.initial.speed)) if disc.initial.speed is not None else np.nan
+        raise InputError(f"{scene.where('run.t_end')} = {t_end!r} would take {steps:.3g} steps of "
+                         f"Delta t = {dt:.3g} s (fastest wave {c:.3g} m/s, from material E and rho), more than "
+                         f"run.step_limit = {limit}: check material.E and material.rho, or raise run.step_limit")
+
+
+def allowed_above_limit(scene):
+    value = scene.get("method.cfl_above_limit", False)
+    if not isinstance(value, bool):
+        raise InputError(f"{scene.where('method.cfl_above_limit')} = {value!r} must be true or false")
+    return value
+
+
+def mpm_limit(disc):
+    """MPM: dt = CFL h / (c + |v|): a wave or a particle may cross at most one cell per step."""
+    return 1.0
