@@ -202,7 +202,18 @@ def make_bc(spec, d, where="boundary"):
     return bc
 
 
+def _numbers(value):
+    """Numbers (not strings, not booleans), or nested lists of them."""
+    if isinstance(value, (list, tuple)):
+        return all(_numbers(v) for v in value)
+    return isinstance(value, (int, float, np.number)) and not isinstance(value, (bool, np.bool_))
+
+
 def _numeric(value):
+    """Finite numbers, or lists of them: ["1e9"] is a string, not a number (np.asarray would
+    convert it)."""
+    if not _numbers(value):
+        return False
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):

@@ -5,7 +5,9 @@ import warnings
 
 import numpy as np
 
-from .bcs import make_bc
+from .bcs import _numbers, make_bc
+from .ader_dgmpm import BACKMAPS
+from .limiter import KINDS as LIMITERS
 from .constitutive import MaterialSet
 from .ader import ADERDGFEM
 from .ader_dgmpm import ADERDGMPM
@@ -162,7 +164,9 @@ def build(scene):
     integrators = {"dgmpm": ("euler", "rk2"), "rk-dgfem": INTEGRATORS}.get(name)
     mpm_options = ((("update", tuple(UPDATES)), ("shape", SHAPES), ("time_step", ("current", "bar")))
                    if name == "mpm" else ())
-    for key, choices in (("integrator", integrators), ("transverse", ("dcu", "ctu")), *mpm_options):
+    dg_options = ((("limiter", LIMITERS),) if name in ("rk-dgfem", "ader-dgfem", "ader-dgmpm") else ()) + \
+        ((("backmap", BACKMAPS),) if name == "ader-dgmpm" else ())
+    for key, choices in (("integrator", integrators), ("transverse", ("dcu", "ctu")), *mpm_options, *dg_options):
         # ADER methods are their own time integrator: a scene's integrator key is ignored
         if choices is not None and key in method and method[key] not in choices:
             raise InputError(f"{scene.where(f'method.{key}')} = {method[key]!r}: expected one of "
@@ -257,7 +261,7 @@ def _read_points(scene, name, d):
 
 def _array(scene, key, value, shape, what):
     try:
-        arr = np.asarray(value, dtype=float)
+        arr = np.asarray(value, dtype=float) if _numbers(value) else None
     except (TypeError, ValueError):
         arr = None
     if arr is None or arr.shape != shape or not np.all(np.isfinite(arr)):

@@ -51,18 +51,54 @@ def load_mesh(path):
     import meshio
     from skfem.io.meshio import from_meshio
 
+    import contextlib
+    import io
+
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: mesh file not found")
+    said = io.StringIO()                  # meshio prints its own warnings and errors: ours says it all
     try:
-        mesh = from_meshio(meshio.read(path))
-    except Exception as exc:  # meshio raises many types; the user needs the file name
-        raise InputError(f"{path}: cannot read mesh ({type(exc).__name__}: {exc})") from None
+        with contextlib.redirect_stderr(said), contextlib.redirect_stdout(said):
+            raw = meshio.read(path)
+            points = np.asarray(raw.points, dtype=float)
+            bad = np.flatnonzero(~np.all(np.isfinite(points), axis=1))
+            if len(bad):
+                raise InputError(f"{path}: node {bad[0]} has non-finite coordinates {points[bad[0]].tolist()} "
+                                 f"({len(bad)} such node(s))")
+            mesh = from_meshio(raw)
+    except InputError:
+        raise
+    except (Exception, SystemExit) as exc:  # meshio raises many types, or exits; the user needs the file name
+        detail = str(exc).strip() or said.getvalue().strip().splitlines()[-1:] or [type(exc).__name__]
+        detail = detail if isinstance(detail, str) else detail[0]
+        raise InputError(f"{path}: cannot read mesh ({type(exc).__name__}: {detail})") from None
     if not isinstance(mesh, (MeshQuad, MeshLine)):
         raise InputError(f"{path}: grid must be made of quads (or lines in 1D), got {type(mesh).__name__}")
     if isinstance(mesh, MeshQuad):
         mesh = _counter_clockwise(mesh)
+        _check_quads(path, mesh)
     return mesh
+
+
+def _check_quads(path, mesh):
+    """Every quad convex with a positive Jacobian at its four corners (after `_counter_clockwise`):
+    a degenerate (zero area, repeated node), bow-tie (self-intersecting) or non-convex quad has a
+    Jacobian <= 0 somewhere, where the bilinear map folds; such a mesh is refused, naming the cell."""
+    p, t = mesh.p, mesh.t
+    for c in range(4):
+        corner, after, before = p[:, t[c]], p[:, t[(c + 1) % 4]], p[:, t[(c + 3) % 4]]
+        a, b = after - corner, before - corner
+        cross = a[0] * b[1] - a[1] * b[0]
+        scale = np.linalg.norm(a, axis=0) * np.linalg.norm(b, axis=0)
+        bad = np.flatnonzero(~(cross > 1e-10 * scale))
+        if len(bad):
+            k = int(bad[0])
+            kind = "degenerate (zero area or a repeated node)" if abs(cross[k]) <= 1e-10 * scale[k] else \
+                "self-intersecting (bow-tie) or not convex"
+            raise InputError(f"{path}: cell {k} (nodes {t[:, k].tolist()}) is {kind}: at node {int(t[c, k])} "
+                             f"({', '.join(f'{x:.6g}' for x in p[:, t[c, k]])}) its Jacobian is {cross[k]:.3g} "
+                             f"({len(bad)} such cell(s)); fix the mesh")
 
 
 def _counter_clockwise(mesh):

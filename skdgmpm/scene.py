@@ -60,8 +60,15 @@ def _check(table, schema, source, prefix=""):
             if not isinstance(value, dict):
                 raise InputError(f"{_where(source, path)} = {value!r} must be a table")
         elif not isinstance(value, expected) or (isinstance(value, bool) and expected is not bool):
-            names = "/".join(t.__name__ for t in np.atleast_1d(expected))
+            names = "/".join(t.__name__ for t in _flat_types(expected))
             raise InputError(f"{_where(source, path)} = {value!r} has the wrong type (expected {names})")
+
+
+def _flat_types(expected):
+    """(list, (int, float)) -> [list, int, float]."""
+    if isinstance(expected, tuple):
+        return [t for e in expected for t in _flat_types(e)]
+    return [expected]
 
 
 def parse_override(text):
@@ -122,6 +129,7 @@ class Scene:
     name: str
     data: dict
     path: Path = None
+    overridden: tuple = ()      # dotted keys given with --set (they, not the file, are blamed)
 
     def get(self, dotted, default=None):
         table = self.data
@@ -132,7 +140,15 @@ class Scene:
         return table
 
     def where(self, key):
-        return _where(str(self.path) if self.path else self.name, key)
+        """Where ``key`` comes from, for messages: "FILE: key"; "--set key" when --set gave it (or
+        a table holding it); "FILE with --set a.b=...: key" when --set changed a key inside it."""
+        source = str(self.path) if self.path else self.name
+        if any(key == k or key.startswith(k + ".") or key.startswith(k + "[") for k in self.overridden):
+            return f"--set {key}"
+        inside = [k for k in self.overridden if k.startswith(key + ".")]
+        if inside:
+            return f"{source} with --set {', '.join(inside)}: {key}"
+        return _where(source, key)
 
     @property
     def dim(self):
@@ -145,7 +161,10 @@ class Scene:
     def with_overrides(self, overrides):
         data = apply_overrides(self.data, overrides)
         _check(apply_overrides({}, overrides), SCHEMA, "--set")   # errors name --set, not the file
-        return Scene.from_dict(data, self.name, self.path)
+        keys = [".".join(parse_override(o)[0] if isinstance(o, str) else o[0]) for o in overrides]
+        scene = Scene.from_dict(data, self.name, self.path)
+        scene.overridden = tuple(dict.fromkeys((*self.overridden, *keys)))
+        return scene
 
     @classmethod
     def from_dict(cls, data, name="scene", path=None):
@@ -166,9 +185,14 @@ def load_scene(name, overrides=()):
     """Load a scene by name (from ``cases/``) or path, apply ``--set`` style overrides."""
     path = find_scene(str(name))
     try:
-        data = tomllib.loads(path.read_text())
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"{path}: not valid TOML ({exc})") from None
+    except UnicodeDecodeError as exc:
+        raise InputError(f"{path}: not a UTF-8 text file (byte {exc.object[exc.start]:#04x} at offset "
+                         f"{exc.start}); TOML scene files are UTF-8") from None
+    except OSError as exc:
+        raise InputError(f"{path}: cannot read the scene file ({exc.strerror or exc})") from None
     scene = Scene.from_dict(data, path.stem, path)
     return scene.with_overrides(overrides) if overrides else scene
 
