@@ -78,7 +78,46 @@ def load_mesh(path):
     if isinstance(mesh, MeshQuad):
         mesh = _counter_clockwise(mesh)
         _check_quads(path, mesh)
+    _check_connected(path, mesh)
     return mesh
+
+
+def _check_connected(path, mesh):
+    """Warn (a crack or two bodies may be meant, so not an error) when nodes are duplicated (two
+    nodes at one position: the cells on either side share no facet and are decoupled, a crack
+    along that line) or when the mesh falls into pieces that no facet connects."""
+    import warnings
+
+    p = mesh.p
+    size = float(np.max(np.ptp(p, axis=1))) or 1.0
+    keys = np.round(p.T / (1e-9 * size)).astype(np.int64)
+    _, first, counts = np.unique(keys, axis=0, return_index=True, return_counts=True)
+    if (counts > 1).any():
+        k = int(first[np.flatnonzero(counts > 1)[0]])
+        warnings.warn(f"{path}: {int(np.sum(counts[counts > 1] - 1))} node(s) duplicate another node's position "
+                      f"(first at ({', '.join(f'{x:.6g}' for x in p[:, k])})): the cells on either side share no "
+                      "facet and are decoupled, a crack; merge the nodes in the mesher unless it is meant",
+                      stacklevel=4)
+    f2t = mesh.f2t
+    inner = f2t[1] >= 0
+    parent = np.arange(mesh.nelements)
+
+    def find(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for a, b in zip(f2t[0, inner], f2t[1, inner]):
+        ra, rb = find(a), find(b)
+        if ra != rb:
+            parent[ra] = rb
+    roots = np.array([find(i) for i in range(mesh.nelements)])
+    _, sizes = np.unique(roots, return_counts=True)
+    if len(sizes) > 1:
+        warnings.warn(f"{path}: the mesh is in {len(sizes)} pieces that share no facet "
+                      f"({', '.join(str(s) for s in sorted(sizes, reverse=True)[:5])} cells): they only interact "
+                      "through the boundary conditions", stacklevel=4)
 
 
 def _check_quads(path, mesh):

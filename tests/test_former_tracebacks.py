@@ -145,3 +145,33 @@ def test_a_scene_file_that_cannot_be_read(capsys, here):
     scene.write_text("dim = 1\n")
     scene.chmod(0)
     one_line_error(capsys, run_args(scene, here), str(scene), "cannot read")
+
+
+def test_duplicated_nodes_that_split_the_body_are_warned_about(capsys, here):
+    """Two squares whose shared edge has its nodes twice: decoupled halves (a crack). A crack can be
+    meant, so a warning naming the place, not an error."""
+    points = SQUARES + [[1, 0, 0], [1, 1, 0]]                  # nodes 6, 7 duplicate 1, 4
+    scene = quads(here, points, [[0, 1, 4, 3], [6, 2, 5, 7]])
+    with pytest.warns(UserWarning) as record:
+        from skdgmpm.grid import load_mesh
+        load_mesh(here / "m.msh")
+    text = " ".join(str(w.message) for w in record)
+    assert "2 node(s) duplicate another node's position (first at (1, 0))" in text and "crack" in text
+    assert "2 pieces that share no facet" in text
+    with pytest.warns(UserWarning, match="crack"):
+        rc, out, err = cli(capsys, *run_args(scene, here))
+    assert rc == 0, err
+
+
+def test_shipped_meshes_read_without_warnings():
+    import warnings
+    from importlib import resources
+    from pathlib import Path
+
+    from skdgmpm.grid import load_mesh
+    meshes = sorted(Path(str(resources.files("skdgmpm.cases"))).glob("*.msh"))
+    assert meshes
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for m in meshes:
+            load_mesh(m)
