@@ -42,6 +42,10 @@ def build_mesh(scene):
         path = scene.resolve(g["mesh"])
         if not path.is_file():
             raise InputError(f"{scene.where('grid.mesh')} = {g['mesh']!r}: mesh file {path} not found")
+        ignored = [k for k in ("length", "cells", "size", "origin") if k in g]
+        if ignored:
+            warnings.warn(f"{', '.join(scene.where(f'grid.{k}') for k in ignored)}: no effect, the mesh file "
+                          f"grid.mesh = {g['mesh']!r} sets the grid", stacklevel=3)
         mesh = load_mesh(path)
         if mesh.dim() != d:
             raise InputError(f"{scene.where('grid.mesh')} = {g['mesh']!r} is {mesh.dim()}D but dim = {d}")
@@ -164,8 +168,8 @@ def build(scene):
     integrators = {"dgmpm": ("euler", "rk2"), "rk-dgfem": INTEGRATORS}.get(name)
     mpm_options = ((("update", tuple(UPDATES)), ("shape", SHAPES), ("time_step", ("current", "bar")))
                    if name == "mpm" else ())
-    dg_options = ((("limiter", LIMITERS),) if name in ("rk-dgfem", "ader-dgfem", "ader-dgmpm") else ()) + \
-        ((("backmap", BACKMAPS),) if name == "ader-dgmpm" else ())
+    # a limiter is checked for every method (DGMPM and MPM have none: a wrong name is still wrong)
+    dg_options = (("limiter", LIMITERS),) + ((("backmap", BACKMAPS),) if name == "ader-dgmpm" else ())
     for key, choices in (("integrator", integrators), ("transverse", ("dcu", "ctu")), *mpm_options, *dg_options):
         # ADER methods are their own time integrator: a scene's integrator key is ignored
         if choices is not None and key in method and method[key] not in choices:

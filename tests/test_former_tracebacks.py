@@ -175,3 +175,14 @@ def test_shipped_meshes_read_without_warnings():
         warnings.simplefilter("error")
         for m in meshes:
             load_mesh(m)
+
+
+def test_keys_a_mesh_file_overrides_are_not_silently_ignored(here):
+    from skdgmpm.run import run
+    with pytest.warns(UserWarning, match=r"--set grid.cells: no effect, the mesh file grid.mesh = 'plate_4x3.msh'"):
+        run("partial_impact_2d", ["grid.cells=[0, 3]", "run.t_end=1e-6"], progress=False)
+
+
+def test_a_limiter_name_is_checked_for_every_method(capsys, here):
+    one_line_error(capsys, ["run", "bar_elastic_1d", "--out", here / "o", "--set", 'method.limiter="bogus"'],
+                   "--set method.limiter = 'bogus'", "expected one of")

@@ -48,7 +48,7 @@ def test_temporal_study_rates_along_the_time_step_and_unstable_runs_record_error
                            cfls=[0.1, 0.2])
     with pytest.warns(UserWarning, match="von Neumann"):          # CFL 2 is far above the limit 0.69
         stable, blown = convergence("standing_wave_2d", ["dgmpm"], [1], [4], fields=["P11"], progress=False,
-                                    cfls=[0.2, 2.0], overrides=["run.t_end=2e-3"])
+                                    cfls=[0.2, 2.0], overrides=["run.t_end=2e-3", "method.cfl_above_limit=true"])
     assert ok["status"] == slow["status"] == stable["status"] == "ok" and blown["status"] == "unstable"
     assert blown["L2_P11"] == 1.0 and np.isnan(blown["rate_P11"])
     assert np.isclose(slow["dt"], 2 * ok["dt"], rtol=0.05)
