@@ -235,7 +235,7 @@ def test_multiholed_j2_cell_flows_behind_the_front_only():
     """2 mm mesh, ADER-DGMPM S1T1 CFL 0.2 (the scene's method), to t = 1e-6 s (the front,
     c_e t = 5.9 mm from the loaded face, has reached hole 3): the impact stress rho c_e v =
     13.7 GPa is twenty times the HEL, so every particle next to the loaded face has flowed (the
-    1D state there has eqp = 0.036, `driven_j2_state` at small strain; measured min 0.03); no
+    1D state there has eqp = 0.039, `driven_j2_state` at small strain; measured min 0.03); no
     plastic flow more than two cells (4 mm) ahead of the elastic front (ADER-DGMPM's precursor
     ahead of the front is elastic: measured eqp = 0 beyond 2 mm ahead); the yield surface holds
     at every particle (Kirchhoff stress, round-off); the energy balance never grows and the
