@@ -127,6 +127,7 @@ def write(snaps, out, scene_name, map_fields=("sigma11",)):
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
 
+    from .pictures import SEQUENTIAL
     from .plots import field_label
 
     out.mkdir(parents=True, exist_ok=True)
@@ -151,14 +152,12 @@ def write(snaps, out, scene_name, map_fields=("sigma11",)):
     for (t, group), field in ((item, f) for item in sorted(by_time.items()) for f in map_fields):
         values = np.concatenate([s.fields[field] for s in group])
         lim = np.nanpercentile(np.abs(values), 99.5) or 1.0
+        lo, cmap = (0.0, "viridis") if field in SEQUENTIAL else (-lim, "coolwarm")   # eqp >= 0
         fig, axes = plt.subplots(1, len(group), figsize=(3.6 * len(group), 3.4), squeeze=False)
         for ax, s in zip(axes[0], group):
             for e in s.outline:
                 ax.plot(e[:, 0], e[:, 1], "-", color="0.6", lw=0.6)
-            if values.min() >= 0:           # eqp and other fields that grow from zero: sequential
-                sc = ax.scatter(s.x[:, 0], s.x[:, 1], c=s.fields[field], s=4, cmap="viridis", vmin=0, vmax=lim)
-            else:
-                sc = ax.scatter(s.x[:, 0], s.x[:, 1], c=s.fields[field], s=4, cmap="coolwarm", vmin=-lim, vmax=lim)
+            sc = ax.scatter(s.x[:, 0], s.x[:, 1], c=s.fields[field], s=4, cmap=cmap, vmin=lo, vmax=lim)
             ax.set_aspect("equal")
             ax.set_title(f"{s.method}\n{s.status}", fontsize=8)
             ax.tick_params(labelsize=6)

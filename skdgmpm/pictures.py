@@ -102,11 +102,23 @@ def field_values(result, state, field):
     return fields[field]
 
 
-def colour_range(values):
-    """(lo, hi) over a list of arrays; symmetric about 0 when the values take both signs (zero
-    is then the white middle of the default diverging colour map)."""
+# fields that are non-negative by definition (the equivalent plastic strain, the speed): shown
+# from 0 on a sequential colour map, where a diverging one centred on 0 would waste half its colours
+SEQUENTIAL = ("eqp", "speed")
+
+
+def default_cmap(field):
+    return "viridis" if field in SEQUENTIAL else "coolwarm"
+
+
+def colour_range(values, field=None):
+    """(lo, hi) over a list of arrays; from 0 for the non-negative fields of `SEQUENTIAL`, else
+    symmetric about 0 when the values take both signs (zero is then the white middle of the
+    default diverging colour map)."""
     lo, hi = min(float(v.min()) for v in values), max(float(v.max()) for v in values)
-    if lo <= 0.0 <= hi:
+    if field in SEQUENTIAL:
+        lo = 0.0
+    elif lo <= 0.0 <= hi:
         lo, hi = -max(-lo, hi), max(-lo, hi)
     if lo == hi:
         lo, hi = lo - max(abs(lo), 1.0) * 1e-3, hi + max(abs(hi), 1.0) * 1e-3
@@ -156,26 +168,28 @@ def _positions(result, state, magnify):
 
 
 def plotter(result, field="P11", time=None, grid=True, off_screen=True, window_size=(900, 450),
-            clim=None, cmap="coolwarm", point_size=None, magnify=1.0, title=None):
+            clim=None, cmap=None, point_size=None, magnify=1.0, title=None):
     """A pyvista Plotter showing the particles at ``time`` in the current configuration,
     coloured by ``field``, over the background grid (``grid=False`` hides it).
 
     ``magnify`` scales the displacement x - X (small-strain scenes show nothing at 1);
     ``point_size`` is in pixels (default: about one particle spacing); ``clim`` = (lo, hi)
-    (default: the values' range, symmetric about 0 if they take both signs). ``off_screen=False``
+    (default: the values' range, symmetric about 0 if they take both signs; from 0 for eqp and
+    speed); ``cmap`` (default: coolwarm, viridis for eqp and speed). ``off_screen=False``
     gives a plotter whose ``show()`` opens a window (needs a display).
     """
     return _plotter(result, field, time, grid, off_screen, window_size, clim, cmap, point_size,
                     magnify, title)[0]
 
 
-def _plotter(result, field, time, grid, off_screen, window_size, clim=None, cmap="coolwarm",
+def _plotter(result, field, time, grid, off_screen, window_size, clim=None, cmap=None,
              point_size=None, magnify=1.0, title=None, bounds=None):
     pv = offscreen_pyvista()
     state = frame(result, time)
     cloud = pv.PolyData(_positions(result, state, magnify))
     cloud[field] = field_values(result, state, field)
-    clim = colour_range([cloud[field]]) if clim is None else clim
+    clim = colour_range([cloud[field]], field) if clim is None else clim
+    cmap = default_cmap(field) if cmap is None else cmap
     pl = pv.Plotter(off_screen=off_screen, window_size=list(window_size))
     pl.set_background("white")
     size = float(np.ptp(result.X, axis=0).max())
@@ -255,7 +269,7 @@ def animate(result, path, field="P11", grid=True, fps=5, clim=None, window_size=
     if path.suffix not in (".gif", ".mp4"):
         raise InputError(f"animation {path}: expected a .gif or .mp4 file name")
     if clim is None:
-        clim = colour_range([field_values(result, f, field) for f in result.frames])
+        clim = colour_range([field_values(result, f, field) for f in result.frames], field)
     magnify = options.get("magnify", 1.0)
     every = np.vstack([_positions(result, f, magnify) for f in result.frames])
     if grid:

@@ -139,3 +139,13 @@ def test_repr_is_one_line_with_scene_method_steps_time_and_errors(wave, bar):
     assert f"{wave.state.step} steps to t = {wave.state.t:.4g} s" in text
     assert f"P11 {wave.errors['P11']['L2_rel']:.2e}" in text and "v1" in text
     assert repr(bar).startswith("<Result bar_elastic_1d: dgmpm (euler), ok,")
+
+
+def test_non_negative_fields_get_a_sequential_range_from_zero():
+    """eqp (and speed) start at 0 on a sequential map; signed fields stay symmetric about 0 on the
+    diverging one (where 0 is white), also when their values touch 0 from one side."""
+    from skdgmpm.pictures import colour_range, default_cmap
+    eqp = np.array([0.0, 0.0, 0.02, 0.064])
+    assert colour_range([eqp], "eqp") == (0.0, 0.064) and default_cmap("eqp") == "viridis"
+    assert colour_range([eqp], "P11") == (-0.064, 0.064) and default_cmap("P11") == "coolwarm"
+    assert colour_range([np.array([-2e9, 0.0])], "P11") == (-2e9, 2e9)

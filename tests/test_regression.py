@@ -29,6 +29,9 @@ CASES = {
     "bar_elastoplastic_1d/dgmpm": ("bar_elastoplastic_1d", []),          # history at the particles
     "bar_elastoplastic_1d/rk-dgfem-2": ("bar_elastoplastic_1d", ['method.name="rk-dgfem"', "method.order=2",
                                                                  'method.integrator="rk2"', "grid.cells=20"]),
+    "plate_impact_j2_2d/dgmpm-ctu": ("plate_impact_j2_2d", ["grid.cells=[8, 6]"]),
+    "taylor_impact_2d/dgmpm-ctu": ("taylor_impact_2d", ["grid.cells=[16, 4]"]),
+    "multiholed_cell_j2_2d/ader-dgmpm-1": ("multiholed_cell_j2_2d", ['grid.mesh="multiholed_cell_2mm.msh"']),
     "bar_elastic_1d/dgmpm-rk2": ("bar_elastic_1d", ["particles.per_cell=2", 'method.integrator="rk2"']),
     "bar_elastic_1d/rk-dgfem-2": ("bar_elastic_1d", ['method.name="rk-dgfem"', "method.order=2",
                                                      'method.integrator="rk4"', "method.cfl=0.5"]),

@@ -20,7 +20,9 @@ TESTED = {"bar_elastic_1d", "bar_svk_1d", "bar_svk_tension_1d", "plane_wave_svk_
           "convergence_square",        # convergence_square: tests/test_ader.py
           "lasat_2d", "multiholed_cell_2d",    # the hard scenes: tests/test_hard_scenes.py
           "mms_axis_aligned_2d", "mms_ring_2d",  # WG08 manufactured; every method: tests/test_manufactured.py
-          "bar_elastoplastic_1d"}      # every method against the exact two-wave solution: tests/test_laws_every_method.py
+          "bar_elastoplastic_1d",      # every method against the exact two-wave solution: tests/test_laws_every_method.py
+          # elastoplastic (J2) scenes: tests/test_plasticity_scenes.py
+          "plate_impact_j2_2d", "taylor_impact_2d", "multiholed_cell_j2_2d"}
 
 
 def test_every_scene_is_tested():
