@@ -7,7 +7,9 @@ scheduler's SIGTERM, SIGKILL, a full disk) is what it had done:
   final name (`atomic_write`): a reader, or a run killed midway, sees the old file or the new one,
   never part of one. A frame is renamed into place before the ``.pvd`` that lists it, and
   ``energy.csv``, ``summary.json`` (status "running" until the end) and ``particles.pvd`` are
-  rewritten after every frame, so they never reference a frame that is not complete on disk.
+  rewritten after every frame, in that order, so they never reference a frame that is not complete
+  on disk, and each is at least as new as the next (killed between two renames, energy.csv may
+  hold a step more than summary.json, whose t_final is never behind the last frame listed).
 - a lock (``fcntl.flock`` on ``.skdgmpm.lock`` in the folder) is held for the whole run: a second
   run into the same folder is refused with a one-line error naming the running one (pid, host,
   start). The kernel drops the lock when its process dies, SIGKILL included, so a stale lock file
