@@ -27,23 +27,35 @@ dimension (or any small size the compiler should see as a constant: a state widt
 is chosen in Python, and each value gets its own compiled kernel, made by a factory:
 
     @kernel_factory
-    def _volume_flux(d):                        # d: a literal int (or None: read at run time)
-        def volume_flux(Q, indptr, indices, data, add, R):
-            _volume_flux_d(Q, indptr, indices, data, add, R, d)
-        return volume_flux
+    def _embed(d):                              # d: a literal int (or None: read at run time)
+        def embed(F, F3):                       # the kernel's body, d a constant in it
+            for p in range(len(F)):
+                for i in range(3):
+                    for j in range(3):
+                        F3[p, i, j] = F[p, i, j] if i < d and j < d else (1.0 if i == j else 0.0)
+        return embed
 
-    def volume_flux(...):                       # the Python entry point picks the kernel
-        _volume_flux(len(data))(Q, indptr, indices, data, add, R)
+    def embed(F):                               # the Python entry point picks the kernel
+        F3 = np.empty((len(F), 3, 3))
+        _embed(F.shape[1])(F, F3)
+        return F3
 
-``_volume_flux(2)`` compiles (once per process, memoised) the inner function, a closure over
-d = 2, with ``njit(cache=True)``; the body ``_volume_flux_d`` is ``inline="always"``, so its
-``range(d)`` loops see a constant (unrolled) and its ``if d == 2:`` branches are pruned before
-typing: a kernel holds the code of its own dimension only. numba keys a closure's cache entry
-on its cells' contents (here d), so each d is cached on disk separately. Rules: the closure's
-free variables are plain ints (or None), never functions (a dispatcher does not pickle the same in
-every process); the functions it calls are module globals; call the factory from Python, never
-from compiled code. Sizes not worth a kernel of their own map to None (e.g.
-``nb if nb in (4, 9) else None``) and the body reads them from the arrays.
+``_embed(2)`` compiles (once per process, memoised) the inner function, a closure over d = 2,
+with ``njit(cache=True)``: its ``range(d)`` loops see a constant (unrolled), and its ``if d ==
+2:`` branches, with those of the ``inline="always"`` helpers it calls (given d), are pruned before
+typing: a kernel holds the code of its own dimension only. numba keys a closure's cache entry on
+its cells' contents (here d), so each d is cached on disk apart. Rules:
+
+- the body lives in the inner function itself, not in an ``inline="always"`` helper it calls:
+  numba copies an inlined function's IR at a cost that grows as its size squared (the ~500
+  blocks of a face pass took 44 s);
+- the closure's free variables are plain ints (or None), never functions or arrays (a dispatcher
+  does not pickle the same in every process: the cache would never hit); the functions it calls
+  are module globals;
+- call the factory from Python (entry points keep their names and signatures), never from
+  compiled code;
+- sizes not worth a kernel of their own map to None, e.g. ``(nb, nc) if nb in (4, 9) else (None,
+  None)``, and the factory then returns a body that reads them from the arrays.
 
 The notice
 ----------

@@ -17,7 +17,7 @@ from skdgmpm import kernel_cache
 
 def python(code, cwd, pythonpath=None, cache=None):
     """stdout (JSON) and stderr of ``code`` run by a fresh interpreter."""
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "NUMBA_CACHE_DIR", "XDG_CACHE_HOME")}
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     env.update({"PYTHONPATH": str(pythonpath)} if pythonpath else {})
     env.update({"NUMBA_CACHE_DIR": str(cache)} if cache else {})
     out = subprocess.run([sys.executable, "-c", code], cwd=cwd, env=env, capture_output=True, text=True)
@@ -39,19 +39,20 @@ DIGEST = ("import json, skdgmpm.kernel_cache as k; "
 
 
 def test_import_sets_nothing_global_and_keeps_the_repository_off_the_package_path(tmp_path):
-    code = ("import json, numba, sys; before = numba.config.CACHE_DIR; import skdgmpm, skdgmpm.materials; "
-            "print(json.dumps([numba.config.CACHE_DIR == before, skdgmpm.__path__, skdgmpm.materials.__path__, "
+    code = ("import importlib.util, json, numba, sys; before = numba.config.CACHE_DIR; import skdgmpm; "
+            "materials = importlib.util.find_spec('skdgmpm.materials').submodule_search_locations; "
+            "print(json.dumps([numba.config.CACHE_DIR == before, skdgmpm.__path__, list(materials), "
             "sorted(m for m in sys.modules if m.startswith('skdgmpm'))]))")
     (same, path, materials, modules), _ = python(code, cwd=tmp_path)
     assert same and path == [str(Path(skdgmpm.__file__).parent)]
     assert len(materials) == 1 and Path(materials[0]).name == "materials"
-    assert "skdgmpm.system" not in modules           # no kernel module imported, nothing compiled
+    assert modules == ["skdgmpm", "skdgmpm.kernel_cache"]     # no kernel module imported, nothing compiled
 
 
 def test_kernels_are_filed_under_the_source_digest():
     from skdgmpm import system
 
-    locator = system._embed._cache._impl.locator
+    locator = system._embed(1)._cache._impl.locator
     assert isinstance(locator, kernel_cache.Locator)
     assert locator.get_cache_path() == os.path.join(kernel_cache.cache_dir(), "skdgmpm")
     assert Path(kernel_cache.cache_dir()).name == f"kernels-{kernel_cache.source_digest()}"
@@ -83,3 +84,15 @@ def test_every_environment_with_the_same_sources_shares_the_cache_and_an_edit_ch
     law.write_text(law.read_text() + "\n# edited\n")
     edited, _ = python(DIGEST, cwd=tmp_path, pythonpath=site)
     assert edited[0] != here[0] and edited[1] != here[1]
+
+
+PER_D = ("import json, numpy as np; from skdgmpm import system, riemann\n"
+         "system.primitive(np.ones((4, 1, 1)), np.ones((4, 1)), np.ones(4))\n"
+         "riemann.impedances(np.ones((3, 1, 1, 1, 1)), np.ones((3, 1)), np.ones(3))\n"
+         "print(json.dumps([sorted(system._primitive.kernels), sorted(riemann._impedances.kernels),"
+         " sorted(system._volume_flux.kernels)]))")
+
+
+def test_a_scene_compiles_the_kernels_of_its_own_dimension_only(tmp_path):
+    (primitive, impedances, volume_flux), _ = python(PER_D, cwd=tmp_path)
+    assert primitive == impedances == [[1]] and volume_flux == []
