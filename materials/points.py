@@ -14,6 +14,8 @@ that law's branch (a second inlined copy of the same code would only cost compil
 import numpy as np
 from numba import njit
 
+from skdgmpm.kernel_cache import kernel_factory
+
 from . import gavrilyuk, hencky_j2, j2_plasticity, linear_elastic, mooney_rivlin, neo_hookean, saint_venant_kirchhoff
 
 N_PARAMETERS = 4        # the widest law_parameters
@@ -86,15 +88,12 @@ def law_table(materials):
     return laws, params
 
 
-@njit(cache=True)
-def _tangents(law, prm, F, C):
-    d = C.shape[1]
-    if d == 2:                          # a literal d: the loops unrolled
-        for p in range(len(F)):
-            tangent_point(law, prm, F[p], C[p], 2)
-    else:
+@kernel_factory
+def _tangents(d):                       # a literal d: the loops unrolled
+    def tangents(law, prm, F, C):
         for p in range(len(F)):
             tangent_point(law, prm, F[p], C[p], d)
+    return tangents
 
 
 def tangent_block(material, F, d):
@@ -104,5 +103,5 @@ def tangent_block(material, F, d):
     flat = np.ascontiguousarray(F.reshape(-1, 3, 3))
     law, prm = material.point_law
     C = np.empty((len(flat), d, d, d, d))
-    _tangents(law, prm, flat, C)
+    _tangents(d)(law, prm, flat, C)
     return C.reshape(shape + (d, d, d, d))

@@ -36,23 +36,28 @@ from skdgmpm.materials.points import law_table
 from . import system
 from .ader_kernels import interior_flux_sum, traces
 from .dgfem import DGFEM
+from .kernel_cache import kernel_factory
 from .riemann import _not_hyperbolic
 
 
-@njit(cache=True)
 def _divergence_cells(Q, D, out):
     """out[r, c] = sum_alpha D[alpha, c] F_alpha(Q[r, c]) for per-cell point values Q (R, nel, n, nc)
     and derivative matrices D (d, nel, n, n): F-rows (i, alpha) get -D_alpha v_i, p-rows
     -sum_alpha D_alpha P_i,alpha."""
     d, n = D.shape[0], Q.shape[2]
-    if d == 2 and n == 4:               # literal sizes (Q1 cells, 2 x 2 particles): loops unrolled
-        _divergence_cells_dn(Q, D, out, 2, 4)
-    elif d == 2 and n == 9:             # Q2 cells, 3 x 3 particles
-        _divergence_cells_dn(Q, D, out, 2, 9)
-    elif d == 2:
-        _divergence_cells_dn(Q, D, out, 2, n)
+    # literal sizes, the loops unrolled: d always, n for Q1 and Q2 cells in 2D (2 x 2, 3 x 3 points)
+    _divergence_cells_kernel(d, n if d == 2 and n in (4, 9) else None)(Q, D, out)
+
+
+@kernel_factory
+def _divergence_cells_kernel(d, n):
+    if n is None:                       # n read at run time
+        def divergence_cells(Q, D, out):
+            _divergence_cells_dn(Q, D, out, d, Q.shape[2])
     else:
-        _divergence_cells_dn(Q, D, out, d, n)
+        def divergence_cells(Q, D, out):
+            _divergence_cells_dn(Q, D, out, d, n)
+    return divergence_cells
 
 
 @njit(cache=True, inline="always")
@@ -74,16 +79,24 @@ def _divergence_cells_dn(Q, D, out, d, n):
                         out[b, c, k, dd + i] -= sP
 
 
-@njit(cache=True)
 def _picard_update(U0, T, div, dt, scale, u_hat, new):
     """One Picard update new[s] = U0[s] - dt sum_r T[s, r] div[r] and the change
     max |new - u_hat| / scale (nan if any is nan). Flat arrays: div (R, M), new (S, M), U0 and
     u_hat (S or 1, M) (one row: the same at every node), M = n_points nc; scale (nc,)."""
-    if len(scale) == 6 and len(div) == 2:           # 2D, S1T1 / S2T2: literal sizes, so the sum over
-        return _picard_update_nc(U0, T, div, dt, scale, u_hat, new, 6, 2)    # the nodes unrolls and
-    if len(scale) == 6 and len(div) == 3:           # the loop over the points vectorises
-        return _picard_update_nc(U0, T, div, dt, scale, u_hat, new, 6, 3)
-    return _picard_update_nc(U0, T, div, dt, scale, u_hat, new, len(scale), len(div))
+    # 2D, S1T1 / S2T2: literal sizes, so the sum over the nodes unrolls and the loop over the points vectorises
+    sizes = (6, len(div)) if len(scale) == 6 and len(div) in (2, 3) else (None, None)
+    return _picard_update_kernel(*sizes)(U0, T, div, dt, scale, u_hat, new)
+
+
+@kernel_factory
+def _picard_update_kernel(nc, n_r):
+    if nc is None:                      # sizes read at run time
+        def picard_update(U0, T, div, dt, scale, u_hat, new):
+            return _picard_update_nc(U0, T, div, dt, scale, u_hat, new, len(scale), len(div))
+    else:
+        def picard_update(U0, T, div, dt, scale, u_hat, new):
+            return _picard_update_nc(U0, T, div, dt, scale, u_hat, new, nc, n_r)
+    return picard_update
 
 
 @njit(cache=True, inline="always")

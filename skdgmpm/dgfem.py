@@ -22,6 +22,7 @@ from . import forms, system
 from .elements import ElementLineLagrange
 from .errors import InputError
 from .faces import interior_faces
+from .kernel_cache import kernel_factory
 from .limiter import SlopeLimiter
 from .particles import Particles
 from .scheme import GodunovScheme, GridState, ParticleState, advance_positions
@@ -29,18 +30,24 @@ from .scheme import GodunovScheme, GridState, ParticleState, advance_positions
 INTEGRATORS = ("rk2", "rk4")
 
 
-@njit(cache=True)
 def _apply_blocks(blocks, cell_dofs, R, out):
     """out[dofs of c] = blocks[c] @ R[dofs of c] for every cell c: blocks (nel, nb, nb), cell_dofs
     (nel, nb), R and out (n_dofs, nc) (a compiled loop: numpy's batched matmul on a gathered copy
     cost ~4 ms a call at 128^2)."""
     nb, nc = blocks.shape[1], R.shape[1]
-    if nb == 4 and nc == 6:             # Q1 in 2D: literal sizes, the loops unrolled
-        _apply_blocks_n(blocks, cell_dofs, R, out, 4, 6)
-    elif nb == 9 and nc == 6:           # Q2 in 2D
-        _apply_blocks_n(blocks, cell_dofs, R, out, 9, 6)
+    literal = nc == 6 and nb in (4, 9)      # Q1, Q2 in 2D: literal sizes, the loops unrolled
+    _apply_blocks_kernel(nb if literal else None, nc if literal else None)(blocks, cell_dofs, R, out)
+
+
+@kernel_factory
+def _apply_blocks_kernel(nb, nc):
+    if nb is None:                      # sizes read at run time
+        def apply_blocks(blocks, cell_dofs, R, out):
+            _apply_blocks_n(blocks, cell_dofs, R, out, blocks.shape[1], R.shape[1])
     else:
-        _apply_blocks_n(blocks, cell_dofs, R, out, nb, nc)
+        def apply_blocks(blocks, cell_dofs, R, out):
+            _apply_blocks_n(blocks, cell_dofs, R, out, nb, nc)
+    return apply_blocks
 
 
 @njit(cache=True, inline="always")
@@ -54,26 +61,20 @@ def _apply_blocks_n(blocks, cell_dofs, R, out, nb, nc):
                 out[cell_dofs[c, k], j] = s
 
 
-@njit(cache=True)
-def _volume_term(indptr, indices, data, Q, alpha, d, out):
-    """out += D^T F_alpha(Q) for one CSR D (n_points, n_dofs) of weighted derivatives dPhi/dX_alpha,
-    scattered in point order as scipy's D.T @ F is: F-columns (j, alpha) get -v_j, p-columns
-    -P_j,alpha (no flux array is built)."""
-    if d == 2:                          # a literal d: the loops unrolled
-        _volume_term_d(indptr, indices, data, Q, alpha, out, 2)
-    else:
-        _volume_term_d(indptr, indices, data, Q, alpha, out, d)
-
-
-@njit(cache=True, inline="always")
-def _volume_term_d(indptr, indices, data, Q, alpha, out, d):
-    dd = d * d
-    for q in range(len(indptr) - 1):
-        for k in range(indptr[q], indptr[q + 1]):
-            i, w = indices[k], data[k]
-            for j in range(d):
-                out[i, j * d + alpha] += w * -Q[q, dd + j]
-                out[i, dd + j] += w * -Q[q, j * d + alpha]
+@kernel_factory
+def _volume_term(d):                    # a literal d: the loops unrolled
+    def volume_term(indptr, indices, data, Q, alpha, out):
+        """out += D^T F_alpha(Q) for one CSR D (n_points, n_dofs) of weighted derivatives
+        dPhi/dX_alpha, scattered in point order as scipy's D.T @ F is: F-columns (j, alpha) get
+        -v_j, p-columns -P_j,alpha (no flux array is built)."""
+        dd = d * d
+        for q in range(len(indptr) - 1):
+            for k in range(indptr[q], indptr[q + 1]):
+                i, w = indices[k], data[k]
+                for j in range(d):
+                    out[i, j * d + alpha] += w * -Q[q, dd + j]
+                    out[i, dd + j] += w * -Q[q, j * d + alpha]
+    return volume_term
 
 
 def dg_element(d, order):
@@ -208,7 +209,7 @@ class DGFEM(GodunovScheme):
         term = np.empty_like(R)
         for a, D in enumerate(self.D):
             term[...] = 0.0
-            _volume_term(D.indptr, D.indices, D.data, Q, a, self.d, term)
+            _volume_term(self.d)(D.indptr, D.indices, D.data, Q, a, term)
             R += term
         return R
 

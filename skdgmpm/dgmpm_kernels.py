@@ -20,8 +20,18 @@ from numba import njit
 from skdgmpm.materials.points import tangent_point
 
 from .faces import gather_row
+from .kernel_cache import kernel_factory
 from .riemann import _acoustic, _acoustic2, _godunov_flux2, _godunov_sides, _sqrt_spd, _sqrt_spd2, _stress_rate
 from .system import scratch
+
+
+@njit(cache=True)
+def tangent_call(law, prm, F, C, d):
+    """`skdgmpm.materials.points.tangent_point` as a function of its own, compiled once per d and
+    called, where the compiled passes would otherwise inline every law at every call site: the 1D
+    passes call it (their compile time halves), the 2D ones inline the law (its tangent stays in
+    registers: the hot loops)."""
+    tangent_point(law, prm, F, C, d)
 
 
 # ---------------------------------------------------------------- point pieces (one face side)
@@ -140,94 +150,96 @@ def _face_flux(t_s, v_s, N, flux, d):
 
 
 # ---------------------------------------------------------------- interior faces
-@njit(cache=True)
 def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
                   ctu, topo_L, topo_R, flux, corr, corr_bnd):
     """Godunov flux of every interior face into flux (nf, nc) and, for ``ctu`` (2D), the
     transverse corrections per unit Delta t of both sides' fluctuations added to corr (nf, nc)
     and corr_bnd (nb, nc) (zero on entry). Returns the first face whose acoustic tensor is not
     positive definite, or -1."""
-    if N.shape[1] == 2:                 # a literal d: the (d, d) loops unrolled
-        return _interior_d(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
-                           ctu, topo_L, topo_R, flux, corr, corr_bnd, 2)
-    return _interior_d(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
-                       ctu, topo_L, topo_R, flux, corr, corr_bnd, N.shape[1])
+    return _interior_pass(N.shape[1])(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
+                                      ctu, topo_L, topo_R, flux, corr, corr_bnd)
 
 
-@njit(cache=True, inline="always")
-def _interior_d(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
-                ctu, topo_L, topo_R, flux, corr, corr_bnd, d):
-    nc = d * d + d
-    q_L, q_R = scratch((nc,)), scratch((nc,))
-    F_L, F_R = scratch((3, 3)), scratch((3, 3))
-    C_L, C_R = scratch((d, d, d, d)), scratch((d, d, d, d))
-    M, Z_L, Z_R, Zi, A = scratch((d, d)), scratch((d, d)), scratch((d, d)), scratch((d, d)), scratch((d, d))
-    b, t_L, t_R, t_s, v_s = scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,))
-    for f in range(len(N)):
-        rho_L = _gather(T_L, f, U, Q, rho, q_L, F_L, d)
-        rho_R = _gather(T_R, f, U, Q, rho, q_R, F_R, d)
-        m_L, m_R = cell_material[cell_L[f]], cell_material[cell_R[f]]
-        tangent_point(laws[m_L], params[m_L], F_L, C_L, d)
-        tangent_point(laws[m_R], params[m_R], F_R, C_R, d)
-        if d == 2:                      # the face in scalars (registers), its CTU split too
-            n0, n1 = N[f, 0], N[f, 1]
-            ok, ts0, ts1, vs0, vs1 = _godunov_flux2(q_L, C_L, rho_L, q_R, C_R, rho_R, n0, n1)
-            if not ok:
+@kernel_factory
+def _interior_pass(d):                  # a literal d: the (d, d) loops unrolled
+    def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
+                      ctu, topo_L, topo_R, flux, corr, corr_bnd):
+        nc = d * d + d
+        q_L, q_R = scratch((nc,)), scratch((nc,))
+        F_L, F_R = scratch((3, 3)), scratch((3, 3))
+        C_L, C_R = scratch((d, d, d, d)), scratch((d, d, d, d))
+        M, Z_L, Z_R, Zi, A = scratch((d, d)), scratch((d, d)), scratch((d, d)), scratch((d, d)), scratch((d, d))
+        b, t_L, t_R, t_s, v_s = scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,))
+        for f in range(len(N)):
+            rho_L = _gather(T_L, f, U, Q, rho, q_L, F_L, d)
+            rho_R = _gather(T_R, f, U, Q, rho, q_R, F_R, d)
+            m_L, m_R = cell_material[cell_L[f]], cell_material[cell_R[f]]
+            if d == 1:                  # the law called, not inlined: compile time (`tangent_call`)
+                tangent_call(laws[m_L], params[m_L], F_L, C_L, d)
+                tangent_call(laws[m_R], params[m_R], F_R, C_R, d)
+            else:
+                tangent_point(laws[m_L], params[m_L], F_L, C_L, d)
+                tangent_point(laws[m_R], params[m_R], F_R, C_R, d)
+            if d == 2:                      # the face in scalars (registers), its CTU split too
+                n0, n1 = N[f, 0], N[f, 1]
+                ok, ts0, ts1, vs0, vs1 = _godunov_flux2(q_L, C_L, rho_L, q_R, C_R, rho_R, n0, n1)
+                if not ok:
+                    return f
+                flux[f, 0], flux[f, 1], flux[f, 2], flux[f, 3] = -(vs0 * n0), -(vs0 * n1), -(vs1 * n0), -(vs1 * n1)
+                flux[f, 4], flux[f, 5] = -ts0, -ts1
+                if ctu:                     # fluctuations A- dQ = F* - F_N(Q_L) into L, A+ dQ into R
+                    tL0, tL1 = q_L[0] * n0 + q_L[1] * n1, q_L[2] * n0 + q_L[3] * n1
+                    tR0, tR1 = q_R[0] * n0 + q_R[1] * n1, q_R[2] * n0 + q_R[3] * n1
+                    w_L = (-(vs0 * n0) + q_L[4] * n0, -(vs0 * n1) + q_L[4] * n1, -(vs1 * n0) + q_L[5] * n0,
+                           -(vs1 * n1) + q_L[5] * n1, -ts0 + tL0, -ts1 + tL1)
+                    w_R = (-(q_R[4] * n0) + vs0 * n0, -(q_R[4] * n1) + vs0 * n1, -(q_R[5] * n0) + vs1 * n0,
+                           -(q_R[5] * n1) + vs1 * n1, -tR0 + ts0, -tR1 + ts1)
+                    if not _split_interior(w_L, C_L, rho_L, topo_L, f, corr, corr_bnd):
+                        return f
+                    if not _split_interior(w_R, C_R, rho_R, topo_R, f, corr, corr_bnd):
+                        return f
+                continue
+            if not _godunov_sides(q_L, C_L, rho_L, q_R, C_R, rho_R, N[f], t_L, t_R, M, Z_L, Z_R, Zi, A, b, t_s, v_s, d):
                 return f
-            flux[f, 0], flux[f, 1], flux[f, 2], flux[f, 3] = -(vs0 * n0), -(vs0 * n1), -(vs1 * n0), -(vs1 * n1)
-            flux[f, 4], flux[f, 5] = -ts0, -ts1
-            if ctu:                     # fluctuations A- dQ = F* - F_N(Q_L) into L, A+ dQ into R
-                tL0, tL1 = q_L[0] * n0 + q_L[1] * n1, q_L[2] * n0 + q_L[3] * n1
-                tR0, tR1 = q_R[0] * n0 + q_R[1] * n1, q_R[2] * n0 + q_R[3] * n1
-                w_L = (-(vs0 * n0) + q_L[4] * n0, -(vs0 * n1) + q_L[4] * n1, -(vs1 * n0) + q_L[5] * n0,
-                       -(vs1 * n1) + q_L[5] * n1, -ts0 + tL0, -ts1 + tL1)
-                w_R = (-(q_R[4] * n0) + vs0 * n0, -(q_R[4] * n1) + vs0 * n1, -(q_R[5] * n0) + vs1 * n0,
-                       -(q_R[5] * n1) + vs1 * n1, -tR0 + ts0, -tR1 + ts1)
-                if not _split_interior(w_L, C_L, rho_L, topo_L, f, corr, corr_bnd):
-                    return f
-                if not _split_interior(w_R, C_R, rho_R, topo_R, f, corr, corr_bnd):
-                    return f
-            continue
-        if not _godunov_sides(q_L, C_L, rho_L, q_R, C_R, rho_R, N[f], t_L, t_R, M, Z_L, Z_R, Zi, A, b, t_s, v_s, d):
-            return f
-        for k in range(nc):
-            flux[f, k] = 0.0
-        _face_flux(t_s, v_s, N[f], flux[f], d)
-    return -1
+            for k in range(nc):
+                flux[f, k] = 0.0
+            _face_flux(t_s, v_s, N[f], flux[f], d)
+        return -1
+    return interior_pass
 
 
 # ---------------------------------------------------------------- boundary faces
-@njit(cache=True)
 def boundary_sides(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v_L, Z, C, rho_f):
     """Interior side of every boundary face: traction t_L, velocity v_L (nf, d), impedance
     Z = sqrt(rho0 A_N) (nf, d, d), tangent C (nf, d, d, d, d) and density rho_f (nf,). Returns the
     first face whose acoustic tensor is not positive definite, or -1."""
-    if N.shape[1] == 2:
-        return _boundary_sides_d(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v_L, Z, C, rho_f, 2)
-    return _boundary_sides_d(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v_L, Z, C, rho_f,
-                             N.shape[1])
+    return _boundary_sides(N.shape[1])(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v_L, Z, C, rho_f)
 
 
-@njit(cache=True, inline="always")
-def _boundary_sides_d(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v_L, Z, C, rho_f, d):
-    dd, nc = d * d, d * d + d
-    q, F, M, Zi = scratch((nc,)), scratch((3, 3)), scratch((d, d)), scratch((d, d))
-    for f in range(len(N)):
-        rho_f[f] = _gather(T, f, U, Q, rho, q, F, d)
-        m = cell_material[cell[f]]
-        tangent_point(laws[m], params[m], F, C[f], d)
-        for i in range(d):
-            s = 0.0
-            for a in range(d):
-                s += q[i * d + a] * N[f, a]
-            t_L[f, i], v_L[f, i] = s, q[dd + i]
-        _acoustic(C[f], N[f], rho_f[f], M, d)
-        if not _sqrt_spd(M, Z[f], Zi, d):
-            return f
-    return -1
+@kernel_factory
+def _boundary_sides(d):
+    def boundary_sides(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v_L, Z, C, rho_f):
+        dd, nc = d * d, d * d + d
+        q, F, M, Zi = scratch((nc,)), scratch((3, 3)), scratch((d, d)), scratch((d, d))
+        for f in range(len(N)):
+            rho_f[f] = _gather(T, f, U, Q, rho, q, F, d)
+            m = cell_material[cell[f]]
+            if d == 1:
+                tangent_call(laws[m], params[m], F, C[f], d)
+            else:
+                tangent_point(laws[m], params[m], F, C[f], d)
+            for i in range(d):
+                s = 0.0
+                for a in range(d):
+                    s += q[i * d + a] * N[f, a]
+                t_L[f, i], v_L[f, i] = s, q[dd + i]
+            _acoustic(C[f], N[f], rho_f[f], M, d)
+            if not _sqrt_spd(M, Z[f], Zi, d):
+                return f
+        return -1
+    return boundary_sides
 
 
-@njit(cache=True)
 def boundary_pass(N, t_L, v_L, t_s, v_s, C, rho_f, dt, ctu, topo, T_L, T_R, measure, flux, weight, R, corr_bnd):
     """Flux F_N(t*, v*) of every boundary face added to flux (nf, nc) (zero on entry) and, with
     ``ctu``, the transverse corrections of the fluctuation F_N(t*, v*) - F_N(t_L, v_L) entering
@@ -235,30 +247,36 @@ def boundary_pass(N, t_L, v_L, t_s, v_s, C, rho_f, dt, ctu, topo, T_L, T_R, meas
     and face measures: few faces), weighted per node by ``weight`` ((step, inv_M) as in
     `_integrate`), a boundary edge's added to corr_bnd. Returns the first face whose acoustic
     tensor along an edge is not positive definite, or -1."""
-    d = N.shape[1]
-    for f in range(len(N)):
-        _face_flux(t_s[f], v_s[f], N[f], flux[f], d)
-        if ctu:                         # 2D: w = F_N(t*, v*) - F_N(t_L, v_L)
-            n0, n1 = N[f, 0], N[f, 1]
-            w = (flux[f, 0] + v_L[f, 0] * n0, flux[f, 1] + v_L[f, 0] * n1, flux[f, 2] + v_L[f, 1] * n0,
-                 flux[f, 3] + v_L[f, 1] * n1, flux[f, 4] + t_L[f, 0], flux[f, 5] + t_L[f, 1])
-            h, normals, edge_int, edge_bnd, sign = topo
-            ok, G_0, G_1 = _split(w, C[f], rho_f[f], -dt / (2.0 * h[f]), normals, f)
-            if not ok:
-                return f
-            j = edge_int[0, f]
-            if j >= 0:
-                _integrate(T_L, j, -sign[0, f] * measure[j], G_0, weight, R)
-                _integrate(T_R, j, sign[0, f] * measure[j], G_0, weight, R)
-            j = edge_int[1, f]
-            if j >= 0:
-                _integrate(T_L, j, -sign[1, f] * measure[j], G_1, weight, R)
-                _integrate(T_R, j, sign[1, f] * measure[j], G_1, weight, R)
-            _add_boundary_edges(edge_bnd, f, G_0, G_1, corr_bnd)
-    return -1
+    return _boundary_pass(N.shape[1])(N, t_L, v_L, t_s, v_s, C, rho_f, dt, ctu, topo, T_L, T_R, measure, flux,
+                                      weight, R, corr_bnd)
 
 
-@njit(cache=True)
+@kernel_factory
+def _boundary_pass(d):
+    def boundary_pass(N, t_L, v_L, t_s, v_s, C, rho_f, dt, ctu, topo, T_L, T_R, measure, flux, weight, R, corr_bnd):
+        for f in range(len(N)):
+            _face_flux(t_s[f], v_s[f], N[f], flux[f], d)
+            if d == 2 and ctu:              # 2D: w = F_N(t*, v*) - F_N(t_L, v_L)
+                n0, n1 = N[f, 0], N[f, 1]
+                w = (flux[f, 0] + v_L[f, 0] * n0, flux[f, 1] + v_L[f, 0] * n1, flux[f, 2] + v_L[f, 1] * n0,
+                     flux[f, 3] + v_L[f, 1] * n1, flux[f, 4] + t_L[f, 0], flux[f, 5] + t_L[f, 1])
+                h, normals, edge_int, edge_bnd, sign = topo
+                ok, G_0, G_1 = _split(w, C[f], rho_f[f], -dt / (2.0 * h[f]), normals, f)
+                if not ok:
+                    return f
+                j = edge_int[0, f]
+                if j >= 0:
+                    _integrate(T_L, j, -sign[0, f] * measure[j], G_0, weight, R)
+                    _integrate(T_R, j, sign[0, f] * measure[j], G_0, weight, R)
+                j = edge_int[1, f]
+                if j >= 0:
+                    _integrate(T_L, j, -sign[1, f] * measure[j], G_1, weight, R)
+                    _integrate(T_R, j, sign[1, f] * measure[j], G_1, weight, R)
+                _add_boundary_edges(edge_bnd, f, G_0, G_1, corr_bnd)
+        return -1
+    return boundary_pass
+
+
 def euler_update(gather, flux, corr, dt, volume, base, weight, out):
     """out = base + w (volume + G (flux + dt corr)) node by node: a forward Euler stage but its
     boundary terms in one pass over the nodes, given the volume term (n_dofs, nc), the interior
@@ -266,26 +284,25 @@ def euler_update(gather, flux, corr, dt, volume, base, weight, out):
     ``weight`` = (step, inv_M (n_dofs,)).
     G (n_dofs, nf) is the interior surface integral as a gather (`DGMPM.gather_interior`): row i
     holds measure_f (T_R - T_L)[f, i] over the faces f of node i."""
-    if flux.shape[1] == 6:              # 2D states: a literal width, the loops unrolled
-        _euler_update_nc(gather, flux, corr, dt, volume, base, weight, out, 6)
-    else:
-        _euler_update_nc(gather, flux, corr, dt, volume, base, weight, out, flux.shape[1])
+    _euler_update(flux.shape[1])(gather, flux, corr, dt, volume, base, weight, out)
 
 
-@njit(cache=True, inline="always")
-def _euler_update_nc(gather, flux, corr, dt, volume, base, weight, out, nc):
-    indptr, indices, data = gather
-    step, inv_M = weight
-    r = scratch((nc,))
-    for i in range(len(indptr) - 1):
-        for c in range(nc):
-            r[c] = volume[i, c]
-        for k in range(indptr[i], indptr[i + 1]):
-            f, g = indices[k], data[k]
+@kernel_factory
+def _euler_update(nc):                  # a literal width: the loops unrolled
+    def euler_update(gather, flux, corr, dt, volume, base, weight, out):
+        indptr, indices, data = gather
+        step, inv_M = weight
+        r = scratch((nc,))
+        for i in range(len(indptr) - 1):
             for c in range(nc):
-                r[c] += g * (flux[f, c] + dt * corr[f, c])
-        for c in range(nc):
-            out[i, c] = base[i, c] + (step * inv_M[i]) * r[c]
+                r[c] = volume[i, c]
+            for k in range(indptr[i], indptr[i + 1]):
+                f, g = indices[k], data[k]
+                for c in range(nc):
+                    r[c] += g * (flux[f, c] + dt * corr[f, c])
+            for c in range(nc):
+                out[i, c] = base[i, c] + (step * inv_M[i]) * r[c]
+    return euler_update
 
 
 @njit(cache=True)

@@ -11,24 +11,20 @@ from numba import njit
 import scipy.sparse as sp
 from skfem import FacetBasis, InteriorFacetBasis
 
-
-@njit(cache=True)
-def _integrate(indptr, indices, data, measure, flux, out):
-    """out[i] += T[f, i] (measure[f] flux[f]) for the CSR rows f of a trace T, in face order (as
-    scipy's T.T @ (measure flux), without the temporaries)."""
-    if flux.shape[1] == 6:              # 2D states: a literal width, the loop unrolled
-        _integrate_nc(indptr, indices, data, measure, flux, out, 6)
-    else:
-        _integrate_nc(indptr, indices, data, measure, flux, out, flux.shape[1])
+from .kernel_cache import kernel_factory
 
 
-@njit(cache=True, inline="always")
-def _integrate_nc(indptr, indices, data, measure, flux, out, nc):
-    for f in range(len(indptr) - 1):
-        for k in range(indptr[f], indptr[f + 1]):
-            i, w = indices[k], data[k]
-            for c in range(nc):
-                out[i, c] += w * (measure[f] * flux[f, c])
+@kernel_factory
+def _integrate(nc):                     # a literal width: the loop unrolled
+    def integrate(indptr, indices, data, measure, flux, out):
+        """out[i] += T[f, i] (measure[f] flux[f]) for the CSR rows f of a trace T, in face order
+        (as scipy's T.T @ (measure flux), without the temporaries)."""
+        for f in range(len(indptr) - 1):
+            for k in range(indptr[f], indptr[f + 1]):
+                i, w = indices[k], data[k]
+                for c in range(nc):
+                    out[i, c] += w * (measure[f] * flux[f, c])
+    return integrate
 
 
 @njit(cache=True, inline="always")
@@ -116,7 +112,7 @@ class FaceSet:
         T = self.T_L if side == "L" else self.T_R
         if out is None:
             out = np.zeros((T.shape[1], flux.shape[1]))
-        _integrate(T.indptr, T.indices, T.data, sign * self.measure, flux, out)
+        _integrate(flux.shape[1])(T.indptr, T.indices, T.data, sign * self.measure, flux, out)
         return out
 
 

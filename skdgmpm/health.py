@@ -12,6 +12,8 @@ import numpy as np
 from numba import njit
 
 from skdgmpm.materials.points import tangent_point
+from .dgmpm_kernels import tangent_call
+from .kernel_cache import kernel_factory
 from .riemann import _acoustic, _acoustic2
 from .system import scratch
 
@@ -72,59 +74,58 @@ class Health:
                    f"{self.omega[p]:.6g} Pa")
 
 
-@njit(cache=True)
-def _assess(U, Q, material, laws, params, rho, N, n_axes, finite, J, lowest, speed):
-    """Per point p: finite = all of U and Q finite; J = det F (1 where not finite); the
-    eigenvalues of the symmetrised acoustic tensors of the tangent at F (I where not finite) along
-    the directions N (a tuple of n_dir d-tuples): the smallest over all of them into ``lowest`` (nan where not
-    finite), the fastest wave sqrt(largest / rho) over the first ``n_axes`` into ``speed``. One
-    pass: the law's point tangent (`materials.points`), closed forms for d <= 2."""
-    if len(N[0]) == 2:                  # a literal d: the (d, d) loops unrolled
-        _assess_d(U, Q, material, laws, params, rho, N, n_axes, finite, J, lowest, speed, 2)
-    else:
-        _assess_d(U, Q, material, laws, params, rho, N, n_axes, finite, J, lowest, speed, len(N[0]))
-
-
-@njit(cache=True, inline="always")
-def _assess_d(U, Q, material, laws, params, rho, N, n_axes, finite, J, lowest, speed, d):
-    F, C, A = scratch((3, 3)), scratch((d, d, d, d)), scratch((d, d))
-    for p in range(len(U)):
-        ok = True
-        for k in range(d * d + d):        # U.shape[1], a literal count
-            ok = ok and np.isfinite(U[p, k]) and np.isfinite(Q[p, k])
-        finite[p] = ok
-        for i in range(3):              # embedded F, I where not finite
-            for a in range(3):
-                F[i, a] = U[p, i * d + a] if ok and i < d and a < d else (1.0 if i == a else 0.0)
-        if d == 1:
-            J[p] = F[0, 0]
-        elif d == 2:
-            J[p] = F[0, 0] * F[1, 1] - F[0, 1] * F[1, 0]
-        else:
-            J[p] = (F[0, 0] * (F[1, 1] * F[2, 2] - F[1, 2] * F[2, 1]) + F[0, 1] * (F[1, 2] * F[2, 0] - F[1, 0] * F[2, 2])
-                    + F[0, 2] * (F[1, 0] * F[2, 1] - F[1, 1] * F[2, 0]))
-        m = material[p]
-        tangent_point(laws[m], params[m], F, C, d)
-        lo, hi = np.inf, -np.inf
-        for k in range(len(N)):
+@kernel_factory
+def _assess(d):                         # a literal d: the (d, d) loops unrolled
+    def assess(U, Q, material, laws, params, rho, N, n_axes, finite, J, lowest, speed):
+        """Per point p: finite = all of U and Q finite; J = det F (1 where not finite); the
+        eigenvalues of the symmetrised acoustic tensors of the tangent at F (I where not finite)
+        along the directions N (a tuple of n_dir d-tuples): the smallest over all of them into
+        ``lowest`` (nan where not finite), the fastest wave sqrt(largest / rho) over the first
+        ``n_axes`` into ``speed``. One pass: the law's point tangent (`materials.points`), closed
+        forms for d <= 2."""
+        F, C, A = scratch((3, 3)), scratch((d, d, d, d)), scratch((d, d))
+        for p in range(len(U)):
+            ok = True
+            for k in range(d * d + d):        # U.shape[1], a literal count
+                ok = ok and np.isfinite(U[p, k]) and np.isfinite(Q[p, k])
+            finite[p] = ok
+            for i in range(3):              # embedded F, I where not finite
+                for a in range(3):
+                    F[i, a] = U[p, i * d + a] if ok and i < d and a < d else (1.0 if i == a else 0.0)
             if d == 1:
-                small = large = C[0, 0, 0, 0] * (N[k][0] * N[k][0])
-            elif d == 2:                # in scalars: no (d, d) scratch round trip
-                n0, n1 = N[k][0], N[k][d - 1]       # N[k][1] (typed for every d: d - 1)
-                a00, a11 = _acoustic2(C, 0, 0, n0, n1), _acoustic2(C, 1, 1, n0, n1)
-                mean = 0.5 * (a00 + a11)
-                x, y = 0.5 * (a00 - a11), 0.5 * (_acoustic2(C, 0, 1, n0, n1) + _acoustic2(C, 1, 0, n0, n1))
-                r = np.sqrt(x * x + y * y)
-                small, large = mean - r, mean + r
+                J[p] = F[0, 0]
+            elif d == 2:
+                J[p] = F[0, 0] * F[1, 1] - F[0, 1] * F[1, 0]
             else:
-                _acoustic(C, N[k], 1.0, A, d)
-                omega = np.linalg.eigvalsh(0.5 * (A + A.T))
-                small, large = omega[0], omega[-1]
-            lo = min(lo, small)
-            if k < n_axes:
-                hi = max(hi, large)
-        lowest[p] = lo if ok else np.nan
-        speed[p] = np.sqrt(max(hi, 0.0) / rho[m])
+                J[p] = (F[0, 0] * (F[1, 1] * F[2, 2] - F[1, 2] * F[2, 1])
+                        + F[0, 1] * (F[1, 2] * F[2, 0] - F[1, 0] * F[2, 2])
+                        + F[0, 2] * (F[1, 0] * F[2, 1] - F[1, 1] * F[2, 0]))
+            m = material[p]
+            if d == 1:
+                tangent_call(laws[m], params[m], F, C, d)
+            else:
+                tangent_point(laws[m], params[m], F, C, d)
+            lo, hi = np.inf, -np.inf
+            for k in range(len(N)):
+                if d == 1:
+                    small = large = C[0, 0, 0, 0] * (N[k][0] * N[k][0])
+                elif d == 2:                # in scalars: no (d, d) scratch round trip
+                    n0, n1 = N[k][0], N[k][d - 1]       # N[k][1] (typed for every d: d - 1)
+                    a00, a11 = _acoustic2(C, 0, 0, n0, n1), _acoustic2(C, 1, 1, n0, n1)
+                    mean = 0.5 * (a00 + a11)
+                    x, y = 0.5 * (a00 - a11), 0.5 * (_acoustic2(C, 0, 1, n0, n1) + _acoustic2(C, 1, 0, n0, n1))
+                    r = np.sqrt(x * x + y * y)
+                    small, large = mean - r, mean + r
+                else:
+                    _acoustic(C, N[k], 1.0, A, d)
+                    omega = np.linalg.eigvalsh(0.5 * (A + A.T))
+                    small, large = omega[0], omega[-1]
+                lo = min(lo, small)
+                if k < n_axes:
+                    hi = max(hi, large)
+            lowest[p] = lo if ok else np.nan
+            speed[p] = np.sqrt(max(hi, 0.0) / rho[m])
+    return assess
 
 
 def assess(materials, points, U, Q):
@@ -135,6 +136,6 @@ def assess(materials, points, U, Q):
     rho = np.array([m.rho for m in materials.materials])
     finite, J, lowest, speed = np.empty(n, dtype=np.bool_), np.empty(n), np.empty(n), np.empty(n)
     N = tuple(tuple(float(x) for x in n) for n in directions(d))       # a literal count: unrolled
-    _assess(U, Q, np.asarray(points.material, dtype=np.int64), laws, params, rho, N, d,
+    _assess(d)(U, Q, np.asarray(points.material, dtype=np.int64), laws, params, rho, N, d,
             finite, J, lowest, speed)
     return Health(finite, np.where(finite, J, 1.0), lowest, speed)

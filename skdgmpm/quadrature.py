@@ -13,6 +13,7 @@ from skfem import CellBasis
 
 from skdgmpm import forms
 
+from .kernel_cache import kernel_factory
 from .system import scratch
 
 
@@ -133,64 +134,55 @@ class ParticleMap:
         """Nodal (U, Q) from particle (U, Q) (n, d*d + d): U and the stress by `project`, the
         nodal velocity from the projected momentum (v = p / rho), in one compiled pass."""
         U_n, Q_n = np.empty((self.P2G.shape[0], U.shape[1])), np.empty((self.P2G.shape[0], Q.shape[1]))
-        _project_state(self.P2G.indptr, self.P2G.indices, self.P2G.data, U, Q, self.rho, d * d, U_n, Q_n)
+        _project_state(d)(self.P2G.indptr, self.P2G.indices, self.P2G.data, U, Q, self.rho, U_n, Q_n)
         return U_n, Q_n
 
     def interpolate(self, nodal):
         """S nodal for nodal values (n_dofs, nc): one compiled pass, each row summed in CSR order
         as scipy's product does."""
         out = np.empty((self.S.shape[0], nodal.shape[1]))
-        _interpolate(self.S.indptr, self.S.indices, self.S.data, nodal, out)
+        _interpolate(nodal.shape[1])(self.S.indptr, self.S.indices, self.S.data, nodal, out)
         return out
 
 
-@njit(cache=True)
-def _project_state(indptr, indices, data, U, Q, rho, dd, U_n, Q_n):
-    """U_n = P2G U, Q_n = [P2G P, p_n / rho] (each row's products summed in CSR order, as
-    scipy's product does)."""
-    if U.shape[1] == 6:                 # 2D states: a literal width, the loops unrolled
-        _project_state_nc(indptr, indices, data, U, Q, rho, 4, U_n, Q_n, 6)
-    else:
-        _project_state_nc(indptr, indices, data, U, Q, rho, dd, U_n, Q_n, U.shape[1])
+@kernel_factory
+def _project_state(d):                  # literal widths: the loops unrolled
+    dd, nc = d * d, d * d + d
 
-
-@njit(cache=True, inline="always")
-def _project_state_nc(indptr, indices, data, U, Q, rho, dd, U_n, Q_n, nc):
-    u, q = scratch((nc,)), scratch((nc,))       # the row's sums, in registers
-    for r in range(len(indptr) - 1):
-        for c in range(nc):
-            u[c], q[c] = 0.0, 0.0
-        for k in range(indptr[r], indptr[r + 1]):
-            p, w = indices[k], data[k]
+    def project_state(indptr, indices, data, U, Q, rho, U_n, Q_n):
+        """U_n = P2G U, Q_n = [P2G P, p_n / rho] (each row's products summed in CSR order, as
+        scipy's product does)."""
+        u, q = scratch((nc,)), scratch((nc,))       # the row's sums, in registers
+        for r in range(len(indptr) - 1):
             for c in range(nc):
-                u[c] += w * U[p, c]
+                u[c], q[c] = 0.0, 0.0
+            for k in range(indptr[r], indptr[r + 1]):
+                p, w = indices[k], data[k]
+                for c in range(nc):
+                    u[c] += w * U[p, c]
+                for c in range(dd):
+                    q[c] += w * Q[p, c]
+            for c in range(nc):
+                U_n[r, c] = u[c]
             for c in range(dd):
-                q[c] += w * Q[p, c]
-        for c in range(nc):
-            U_n[r, c] = u[c]
-        for c in range(dd):
-            Q_n[r, c] = q[c]
-        for c in range(dd, nc):
-            Q_n[r, c] = u[c] / rho[r]
+                Q_n[r, c] = q[c]
+            for c in range(dd, nc):
+                Q_n[r, c] = u[c] / rho[r]
+    return project_state
 
 
-@njit(cache=True)
-def _interpolate(indptr, indices, data, nodal, out):
-    if nodal.shape[1] == 6:             # 2D states: a literal width, the loops unrolled
-        _interpolate_nc(indptr, indices, data, nodal, out, 6)
-    else:
-        _interpolate_nc(indptr, indices, data, nodal, out, nodal.shape[1])
-
-
-@njit(cache=True, inline="always")
-def _interpolate_nc(indptr, indices, data, nodal, out, nc):
-    u = scratch((nc,))                  # the row's sums, in registers
-    for r in range(len(indptr) - 1):
-        for c in range(nc):
-            u[c] = 0.0
-        for k in range(indptr[r], indptr[r + 1]):
-            n, w = indices[k], data[k]
+@kernel_factory
+def _interpolate(nc):                   # a literal width: the loops unrolled
+    def interpolate(indptr, indices, data, nodal, out):
+        u = scratch((nc,))                  # the row's sums, in registers
+        for r in range(len(indptr) - 1):
             for c in range(nc):
-                u[c] += w * nodal[n, c]
-        for c in range(nc):
-            out[r, c] = u[c]
+                u[c] = 0.0
+            for k in range(indptr[r], indptr[r + 1]):
+                n, w = indices[k], data[k]
+                for c in range(nc):
+                    u[c] += w * nodal[n, c]
+            for c in range(nc):
+                out[r, c] = u[c]
+    return interpolate
+

@@ -19,6 +19,7 @@ from numba import njit
 from scipy.linalg import null_space
 
 from .errors import InstabilityError
+from .kernel_cache import kernel_factory
 
 
 def _not_hyperbolic(face):
@@ -209,68 +210,52 @@ def _godunov_flux2(Q_L, C_L, rho_L, Q_R, C_R, rho_R, n0, n1):
 
 
 # ---------------------------------------------------------------- loops over faces
-# The loops take d as an argument and are inlined into a kernel that calls them with the literal
-# 2 in 2D: the compiler then unrolls every (d, d) loop.
-@njit(cache=True, inline="always")
-def _impedances_d(C, N, rho, Z, Zi, d):
-    M = np.empty((d, d))
-    for f in range(len(N)):
-        _acoustic(C[f], N[f], rho[f], M, d)
-        if not _sqrt_spd(M, Z[f], Zi[f], d):
-            return f
-    return -1
+# One kernel per literal d (`skdgmpm.kernel_cache.kernel_factory`): the compiler unrolls every
+# (d, d) loop of the point functions it inlines and drops the other dimensions' branches.
+@kernel_factory
+def _impedances(d):
+    def impedances(C, N, rho, Z, Zi):
+        M = np.empty((d, d))
+        for f in range(len(N)):
+            _acoustic(C[f], N[f], rho[f], M, d)
+            if not _sqrt_spd(M, Z[f], Zi[f], d):
+                return f
+        return -1
+    return impedances
 
 
-@njit(cache=True)
-def _impedances(C, N, rho, Z, Zi):
-    d = N.shape[1]
-    return _impedances_d(C, N, rho, Z, Zi, 2) if d == 2 else _impedances_d(C, N, rho, Z, Zi, d)
+@kernel_factory
+def _godunov_states(d):
+    def godunov_states(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s):
+        A, b = np.empty((d, d)), np.empty(d)
+        for f in range(len(v_L)):
+            _godunov(t_L[f], v_L[f], t_R[f], v_R[f], Z_L[f], Z_R[f], t_s[f], v_s[f], A, b, d)
+    return godunov_states
 
 
-@njit(cache=True, inline="always")
-def _godunov_states_d(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s, d):
-    A, b = np.empty((d, d)), np.empty(d)
-    for f in range(len(v_L)):
-        _godunov(t_L[f], v_L[f], t_R[f], v_R[f], Z_L[f], Z_R[f], t_s[f], v_s[f], A, b, d)
-
-
-@njit(cache=True)
-def _godunov_states(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s):
-    d = v_L.shape[1]
-    if d == 2:
-        _godunov_states_d(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s, 2)
-    else:
-        _godunov_states_d(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s, d)
-
-
-@njit(cache=True, inline="always")
-def _godunov_fluxes_d(Q_L, C_L, rho_L, Q_R, C_R, rho_R, N, flux, fluct_L, fluct_R, d):
-    M, Z_L, Z_R, Zi, A, b = (np.empty((d, d)), np.empty((d, d)), np.empty((d, d)), np.empty((d, d)),
-                             np.empty((d, d)), np.empty(d))
-    t_L, t_R, t_s, v_s = np.empty(d), np.empty(d), np.empty(d), np.empty(d)
-    dd = d * d
-    for f in range(len(N)):
-        if not _godunov_sides(Q_L[f], C_L[f], rho_L[f], Q_R[f], C_R[f], rho_R[f], N[f], t_L, t_R, M, Z_L, Z_R, Zi,
-                              A, b, t_s, v_s, d):
-            return f
-        v_L, v_R = Q_L[f, dd:], Q_R[f, dd:]
-        for i in range(d):                               # F_N = -[v (x) N ; t]
-            for a in range(d):
-                k = i * d + a
-                flux[f, k] = -(v_s[i] * N[f, a])
-                fluct_L[f, k] = flux[f, k] + v_L[i] * N[f, a]
-                fluct_R[f, k] = -(v_R[i] * N[f, a]) - flux[f, k]
-            flux[f, dd + i] = -t_s[i]
-            fluct_L[f, dd + i] = flux[f, dd + i] + t_L[i]
-            fluct_R[f, dd + i] = -t_R[i] - flux[f, dd + i]
-    return -1
-
-
-@njit(cache=True)
-def _godunov_fluxes(Q_L, C_L, rho_L, Q_R, C_R, rho_R, N, flux, fluct_L, fluct_R):
-    if N.shape[1] == 2:
-        return _godunov_fluxes_d(Q_L, C_L, rho_L, Q_R, C_R, rho_R, N, flux, fluct_L, fluct_R, 2)
-    return _godunov_fluxes_d(Q_L, C_L, rho_L, Q_R, C_R, rho_R, N, flux, fluct_L, fluct_R, N.shape[1])
+@kernel_factory
+def _godunov_fluxes(d):
+    def godunov_fluxes(Q_L, C_L, rho_L, Q_R, C_R, rho_R, N, flux, fluct_L, fluct_R):
+        M, Z_L, Z_R, Zi, A, b = (np.empty((d, d)), np.empty((d, d)), np.empty((d, d)), np.empty((d, d)),
+                                 np.empty((d, d)), np.empty(d))
+        t_L, t_R, t_s, v_s = np.empty(d), np.empty(d), np.empty(d), np.empty(d)
+        dd = d * d
+        for f in range(len(N)):
+            if not _godunov_sides(Q_L[f], C_L[f], rho_L[f], Q_R[f], C_R[f], rho_R[f], N[f], t_L, t_R, M, Z_L, Z_R, Zi,
+                                  A, b, t_s, v_s, d):
+                return f
+            v_L, v_R = Q_L[f, dd:], Q_R[f, dd:]
+            for i in range(d):                               # F_N = -[v (x) N ; t]
+                for a in range(d):
+                    k = i * d + a
+                    flux[f, k] = -(v_s[i] * N[f, a])
+                    fluct_L[f, k] = flux[f, k] + v_L[i] * N[f, a]
+                    fluct_R[f, k] = -(v_R[i] * N[f, a]) - flux[f, k]
+                flux[f, dd + i] = -t_s[i]
+                fluct_L[f, dd + i] = flux[f, dd + i] + t_L[i]
+                fluct_R[f, dd + i] = -t_R[i] - flux[f, dd + i]
+        return -1
+    return godunov_fluxes
 
 
 @njit(cache=True)
@@ -315,7 +300,7 @@ def impedances(C, N, rho0):
     """Z = sqrt(rho0 A_N) and its inverse, (nf, d, d) each, from one decomposition."""
     nf, d = N.shape
     Z, Zinv = np.empty((nf, d, d)), np.empty((nf, d, d))
-    bad = _impedances(C, N, np.asarray(rho0, dtype=float), Z, Zinv)
+    bad = _impedances(d)(C, N, np.asarray(rho0, dtype=float), Z, Zinv)
     if bad >= 0:
         _not_hyperbolic(bad)
     return Z, Zinv
@@ -324,7 +309,7 @@ def impedances(C, N, rho0):
 def godunov_state(t_L, v_L, t_R, v_R, Z_L, Z_R):
     """Stationary traction and velocity (t*, v*) of the linearised Riemann problem."""
     t_s, v_s = np.empty_like(t_L), np.empty_like(v_L)
-    _godunov_states(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s)
+    _godunov_states(v_L.shape[1])(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s)
     return t_s, v_s
 
 
@@ -334,8 +319,8 @@ def godunov_fluxes(Q_L, C_L, rho_L, Q_R, C_R, rho_R, N):
     Q = [P, v] (nf, d*d + d) and linearisations (tangents C, densities rho) in one pass over the
     faces: traction, both impedances, `godunov_state`, flux. Returns three (nf, d*d + d) arrays."""
     flux, fluct_L, fluct_R = np.empty_like(Q_L), np.empty_like(Q_L), np.empty_like(Q_L)
-    bad = _godunov_fluxes(Q_L, C_L, np.asarray(rho_L, dtype=float), Q_R, C_R, np.asarray(rho_R, dtype=float),
-                          N, flux, fluct_L, fluct_R)
+    bad = _godunov_fluxes(N.shape[1])(Q_L, C_L, np.asarray(rho_L, dtype=float), Q_R, C_R,
+                                      np.asarray(rho_R, dtype=float), N, flux, fluct_L, fluct_R)
     if bad >= 0:
         _not_hyperbolic(bad)
     return flux, fluct_L, fluct_R

@@ -5,6 +5,7 @@ import sys
 import threading
 import time
 import warnings
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -14,6 +15,7 @@ from . import checkpoint, guards, outdir, output
 from .build import build
 from .errors import InputError, InstabilityError, OutputError
 from .exact import error_norms
+from .kernel_cache import compile_notice
 from .scene import Scene, exact_solution, load_scene
 
 
@@ -194,7 +196,9 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
         out = Path(out)
         outdir.check(out, force, resume=saved is not None)
     begin = time.perf_counter()
-    disc = build(scene)
+    notice = compile_notice(scene.get("method.name", "dgmpm"), scene.dim) if progress else nullcontext()
+    with notice:                          # a line on stderr if the kernels are not in the cache
+        disc = build(scene)
     solution = exact_solution(scene)
     check_cfl(disc)
     guards.check_step_count(disc, t_end)
@@ -207,8 +211,9 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
     if signals is None:
         signals = out is not None and threading.current_thread() is threading.main_thread()
     try:
-        return _run(scene, disc, solution, stepper, state, t_end, n_frames, out, progress, max_steps,
-                    on_step, begin, saved=saved, every=every, signals=signals)
+        with notice:
+            return _run(scene, disc, solution, stepper, state, t_end, n_frames, out, progress, max_steps,
+                        on_step, begin, saved=saved, every=every, signals=signals)
     finally:
         if folder is not None:
             folder.release()
@@ -316,6 +321,8 @@ def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, progress, 
             try:
                 while state.t < t_end * (1 - 1e-12) and (max_steps is None or state.step < max_steps):
                     new = stepper.step(state, t_end - state.t)
+                    if warm is None:
+                        bar.unpause()             # the first step compiles: its time is not in the rate
                     energies = stepper.energy(new)
                     step_guard.check(state, new, t_end)
                     energy_guard.check(new, sum(energies), stepper.external_work)
@@ -397,6 +404,9 @@ class _NoBar:
         pass
 
     def update(self, n=1):
+        pass
+
+    def unpause(self):
         pass
 
     def close(self):

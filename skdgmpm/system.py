@@ -13,6 +13,8 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 from numba.np.numpy_support import carray
 
+from .kernel_cache import kernel_factory
+
 SCRATCH_SIZE = 81       # entries of a `scratch` array: a (3, 3, 3, 3) tangent
 
 
@@ -55,52 +57,40 @@ def join(T, v):
     return np.concatenate([T.reshape(n, d * d), v], axis=1)
 
 
-@njit(cache=True)
-def _primitive(P, p, rho, Q):
-    if p.shape[1] == 2:                 # a literal d: the loops unrolled (2x faster)
-        _primitive_d(P, p, rho, Q, 2)
-    else:
-        _primitive_d(P, p, rho, Q, p.shape[1])
-
-
-@njit(cache=True, inline="always")
-def _primitive_d(P, p, rho, Q, d):
-    for k in range(len(p)):
-        for i in range(d):
-            for a in range(d):
-                Q[k, i * d + a] = P[k, i, a]
-            Q[k, d * d + i] = p[k, i] / rho[k]
+@kernel_factory
+def _primitive(d):                      # a literal d: the loops unrolled (2x faster)
+    def primitive(P, p, rho, Q):
+        for k in range(len(p)):
+            for i in range(d):
+                for a in range(d):
+                    Q[k, i * d + a] = P[k, i, a]
+                Q[k, d * d + i] = p[k, i] / rho[k]
+    return primitive
 
 
 def primitive(P, p, rho):
     """Q = [P, v], v = p / rho0, from the stress P (n, d, d), momentum p (n, d) and density (n,):
     one compiled pass (P and p may be strided views, e.g. a law's (n, 3, 3) output sliced)."""
     Q = np.empty((len(p), n_components(p.shape[1])))
-    _primitive(P, p, np.asarray(rho, dtype=float), Q)
+    _primitive(p.shape[1])(P, p, np.asarray(rho, dtype=float), Q)
     return Q
 
 
-@njit(cache=True)
-def _embed(F, F3):
-    if F.shape[1] == 2:                 # a literal d: the loops unrolled
-        _embed_d(F, F3, 2)
-    else:
-        _embed_d(F, F3, F.shape[1])
-
-
-@njit(cache=True, inline="always")
-def _embed_d(F, F3, d):
-    for p in range(len(F)):
-        for i in range(3):
-            for j in range(3):
-                F3[p, i, j] = F[p, i, j] if i < d and j < d else (1.0 if i == j else 0.0)
+@kernel_factory
+def _embed(d):                          # a literal d: the loops unrolled
+    def embed(F, F3):
+        for p in range(len(F)):
+            for i in range(3):
+                for j in range(3):
+                    F3[p, i, j] = F[p, i, j] if i < d and j < d else (1.0 if i == j else 0.0)
+    return embed
 
 
 def embed(F):
     """(n, d, d) -> (n, 3, 3): plane strain / uniaxial strain embedding, identity elsewhere (one
     compiled pass; F may be a strided view of a state array)."""
     F3 = np.empty((len(F), 3, 3))
-    _embed(F, F3)
+    _embed(F.shape[1])(F, F3)
     return F3
 
 
@@ -109,40 +99,35 @@ def normal_flux(traction, velocity, N):
     return -join(velocity[:, :, None] * N[:, None, :], traction)
 
 
-@njit(cache=True)
-def _volume_flux(Q, indptr, indices, data, add, R):
-    """R += sum_alpha K^alpha F_alpha(Q) for the CSR matrices K^alpha on one pattern (data: their
-    data arrays stacked (d, nnz)): F-rows (i, alpha) get -K^alpha v_i, p-rows -K^alpha P_i,alpha,
-    each row's products summed in CSR order as scipy's product does and subtracted in the order
-    of alpha; R = ... (each row zeroed as it is reached) unless ``add``."""
-    if len(data) == 2:                  # a literal d: the loops unrolled
-        _volume_flux_d(Q, indptr, indices, data, add, R, 2)
-    else:
-        _volume_flux_d(Q, indptr, indices, data, add, R, len(data))
-
-
-@njit(cache=True, inline="always")
-def _volume_flux_d(Q, indptr, indices, data, add, R, d):
-    dd = d * d
-    sv, sP = scratch((d, d)), scratch((d, d))
-    for r in range(len(indptr) - 1):
-        for a in range(d):
-            for i in range(d):
-                sv[a, i], sP[a, i] = 0.0, 0.0
-        for k in range(indptr[r], indptr[r + 1]):    # the row read once for all the matrices
-            n = indices[k]
+@kernel_factory
+def _volume_flux(d):                    # a literal d: the loops unrolled
+    def volume_flux(Q, indptr, indices, data, add, R):
+        """R += sum_alpha K^alpha F_alpha(Q) for the CSR matrices K^alpha on one pattern (data:
+        their data arrays stacked (d, nnz)): F-rows (i, alpha) get -K^alpha v_i, p-rows
+        -K^alpha P_i,alpha, each row's products summed in CSR order as scipy's product does and
+        subtracted in the order of alpha; R = ... (each row zeroed as it is reached) unless
+        ``add``."""
+        dd = d * d
+        sv, sP = scratch((d, d)), scratch((d, d))
+        for r in range(len(indptr) - 1):
             for a in range(d):
-                w = data[a, k]
                 for i in range(d):
-                    sv[a, i] += w * Q[n, dd + i]
-                    sP[a, i] += w * Q[n, i * d + a]
-        for i in range(d):                           # each entry written once (0 - x is -x exactly)
-            for a in range(d):
-                R[r, i * d + a] = (R[r, i * d + a] if add else 0.0) - sv[a, i]
-            acc = R[r, dd + i] if add else 0.0
-            for a in range(d):
-                acc -= sP[a, i]
-            R[r, dd + i] = acc
+                    sv[a, i], sP[a, i] = 0.0, 0.0
+            for k in range(indptr[r], indptr[r + 1]):    # the row read once for all the matrices
+                n = indices[k]
+                for a in range(d):
+                    w = data[a, k]
+                    for i in range(d):
+                        sv[a, i] += w * Q[n, dd + i]
+                        sP[a, i] += w * Q[n, i * d + a]
+            for i in range(d):                           # each entry written once (0 - x is -x exactly)
+                for a in range(d):
+                    R[r, i * d + a] = (R[r, i * d + a] if add else 0.0) - sv[a, i]
+                acc = R[r, dd + i] if add else 0.0
+                for a in range(d):
+                    acc -= sP[a, i]
+                R[r, dd + i] = acc
+    return volume_flux
 
 
 class Stiffness(tuple):
@@ -169,5 +154,5 @@ def volume_flux(Q, stiffness, out=None):
     if not isinstance(stiffness, Stiffness):
         stiffness = Stiffness(stiffness)
     R = np.empty_like(Q) if out is None else out
-    _volume_flux(Q, *stiffness, out is not None, R)
+    _volume_flux(len(stiffness[2]))(Q, *stiffness, out is not None, R)
     return R

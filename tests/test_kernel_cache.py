@@ -1,6 +1,9 @@
-"""The compiled kernels' disk cache is keyed on every source file of the package: numba checks a
-cached kernel only against its own file, so an edit of a file whose functions it inlines
-(materials/*.py, riemann.py) must lead to a fresh cache, never to the old compiled code."""
+"""The compiled kernels' disk cache (`skdgmpm.kernel_cache`): keyed on every source file of the
+package, so that an edit of a file whose functions a kernel inlines (materials/*.py, riemann.py)
+compiles afresh, and the same for every environment that installs the same sources; importing
+the package changes no global setting; the first run says when it compiles."""
+import json
+import os
 import shutil
 import subprocess
 import sys
@@ -9,30 +12,87 @@ from pathlib import Path
 import numba
 
 import skdgmpm
-
-ROOT = Path(skdgmpm.__file__).resolve().parent.parent
-
-
-def cache_dir_of(checkout, env_home):
-    """skdgmpm.kernel_cache as a fresh interpreter importing ``checkout`` (uninstalled) sees it."""
-    out = subprocess.run([sys.executable, "-c", "import skdgmpm; print(skdgmpm.kernel_cache)"], cwd=checkout,
-                         env={"PYTHONPATH": str(checkout), "XDG_CACHE_HOME": str(env_home), "PATH": ""},
-                         capture_output=True, text=True, check=True)
-    return out.stdout.strip()
+from skdgmpm import kernel_cache
 
 
-def test_numba_caches_where_the_package_says():
-    assert skdgmpm.kernel_cache is not None and numba.config.CACHE_DIR == skdgmpm.kernel_cache
-    assert Path(skdgmpm.kernel_cache).name.startswith("kernels-")
+def python(code, cwd, pythonpath=None, cache=None):
+    """stdout (JSON) and stderr of ``code`` run by a fresh interpreter."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env.update({"PYTHONPATH": str(pythonpath)} if pythonpath else {})
+    env.update({"NUMBA_CACHE_DIR": str(cache)} if cache else {})
+    out = subprocess.run([sys.executable, "-c", code], cwd=cwd, env=env, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout.strip().splitlines()[-1]), out.stderr
 
 
-def test_editing_an_inlined_law_changes_the_cache_key(tmp_path):
-    checkout = tmp_path / "checkout"
-    for sub in ("skdgmpm", "materials", "forms"):
-        shutil.copytree(ROOT / sub, checkout / sub, ignore=shutil.ignore_patterns("__pycache__"))
-    before = cache_dir_of(checkout, tmp_path / "cache")
-    assert before.startswith(str(tmp_path / "cache" / "skdgmpm" / "kernels-"))
-    assert cache_dir_of(checkout, tmp_path / "cache") == before                    # stable
-    law = checkout / "materials" / "neo_hookean.py"
+def installed_copy(root):
+    """The package laid out as ``pip install .`` lays it out (subpackages inside), under ``root``."""
+    site = root / "site"
+    for folder, name in kernel_cache.package_folders().items():
+        target = site.joinpath(*name.split("."))
+        shutil.copytree(folder, target, ignore=shutil.ignore_patterns("__pycache__"))
+    return site
+
+
+DIGEST = ("import json, skdgmpm.kernel_cache as k; "
+          "print(json.dumps([k.source_digest(), k.cache_dir(), sorted(k.package_folders().values())]))")
+
+
+def test_import_sets_nothing_global_and_keeps_the_repository_off_the_package_path(tmp_path):
+    code = ("import importlib.util, json, numba, sys; before = numba.config.CACHE_DIR; import skdgmpm; "
+            "materials = importlib.util.find_spec('skdgmpm.materials').submodule_search_locations; "
+            "print(json.dumps([numba.config.CACHE_DIR == before, skdgmpm.__path__, list(materials), "
+            "sorted(m for m in sys.modules if m.startswith('skdgmpm'))]))")
+    (same, path, materials, modules), _ = python(code, cwd=tmp_path)
+    assert same and path == [str(Path(skdgmpm.__file__).parent)]
+    assert len(materials) == 1 and Path(materials[0]).name == "materials"
+    assert modules == ["skdgmpm", "skdgmpm.kernel_cache"]     # no kernel module imported, nothing compiled
+
+
+def test_kernels_are_filed_under_the_source_digest():
+    from skdgmpm import system
+
+    locator = system._embed(1)._cache._impl.locator
+    assert isinstance(locator, kernel_cache.Locator)
+    assert locator.get_cache_path() == os.path.join(kernel_cache.cache_dir(), "skdgmpm")
+    assert Path(kernel_cache.cache_dir()).name == f"kernels-{kernel_cache.source_digest()}"
+    assert locator.get_source_stamp() == kernel_cache.source_digest()
+    assert kernel_cache.Locator.from_function(python, __file__) is None              # others: numba's own
+
+
+NOTICE = ("import json, sys, numpy as np; from skdgmpm import kernel_cache, system; "
+          "notice = kernel_cache.compile_notice('dgmpm', 1)\n"
+          "with notice: system.embed(np.ones((3, 1, 1)))\n"
+          "print(json.dumps([notice.seconds, kernel_cache.cache_dir()]))")
+
+
+def test_the_first_run_says_it_compiles_and_a_cached_one_does_not(tmp_path):
+    (seconds, where), first = python(NOTICE, cwd=tmp_path, cache=tmp_path / "cache")
+    assert where.startswith(str(tmp_path / "cache" / "kernels-")) and seconds > 0
+    assert first.count("compiling kernels for dgmpm, 1D (first run, about ") == 1 and where in first
+    (seconds, _), again = python(NOTICE, cwd=tmp_path, cache=tmp_path / "cache")
+    assert seconds == 0 and "compiling" not in again
+
+
+def test_every_environment_with_the_same_sources_shares_the_cache_and_an_edit_changes_it(tmp_path):
+    here, _ = python(DIGEST, cwd=tmp_path)
+    site = installed_copy(tmp_path)
+    installed, _ = python(DIGEST, cwd=tmp_path, pythonpath=site)
+    assert installed[2] == here[2] == ["skdgmpm", "skdgmpm.forms", "skdgmpm.materials"]
+    assert installed[0] == here[0] == kernel_cache.source_digest()        # wherever it is installed
+    law = site / "skdgmpm" / "materials" / "neo_hookean.py"
     law.write_text(law.read_text() + "\n# edited\n")
-    assert cache_dir_of(checkout, tmp_path / "cache") != before
+    edited, _ = python(DIGEST, cwd=tmp_path, pythonpath=site)
+    assert edited[0] != here[0] and edited[1] != here[1]
+
+
+PER_D = ("import json, numpy as np; from skdgmpm import system, riemann\n"
+         "system.primitive(np.ones((4, 1, 1)), np.ones((4, 1)), np.ones(4))\n"
+         "riemann.impedances(np.ones((3, 1, 1, 1, 1)), np.ones((3, 1)), np.ones(3))\n"
+         "print(json.dumps([sorted(system._primitive.kernels), sorted(riemann._impedances.kernels),"
+         " sorted(system._volume_flux.kernels)]))")
+
+
+def test_a_scene_compiles_the_kernels_of_its_own_dimension_only(tmp_path):
+    (primitive, impedances, volume_flux), _ = python(PER_D, cwd=tmp_path)
+    assert primitive == impedances == [[1]] and volume_flux == []

@@ -1,0 +1,241 @@
+"""Where and how the compiled kernels are made and kept: a disk cache keyed on the package's
+sources, one compiled kernel per dimension (or other literal size), and the first run's notice.
+
+The cache
+---------
+numba checks a cached kernel only against its own file (a hash of it) and files it under the
+file's directory path: a kernel that inlines functions of other files (riemann.py,
+materials/*.py, system.scratch) would keep running old code after they are edited, and a second
+environment installing the same sources (another venv, another checkout, ``pip install .``)
+would compile everything again. `Locator`, which numba consults first for this package's files
+only (`install`; every other file keeps numba's own locators), files every kernel under
+
+    <base>/kernels-<digest>/<package>/        (<package>: skdgmpm, skdgmpm.materials, ...)
+
+where <digest> hashes every source file of the package by its name within the package, and the
+numba version; the digest is also each kernel's source stamp. An edit anywhere in the package
+thus compiles afresh, and every environment with the same sources and numba version shares one
+cache, wherever it is installed. <base>: $NUMBA_CACHE_DIR if set, else $XDG_CACHE_HOME/skdgmpm or
+~/.cache/skdgmpm; where it cannot be written, numba's own locators take over. Nothing global is
+set: numba's configuration is read, never written.
+
+One kernel per dimension
+------------------------
+A compiled function that branches on the dimension (``if d == 2: f(..., 2) else: f(..., d)``)
+compiles every branch: a 1D scene would pay for the 2D code and the other way round. Instead the
+dimension (or any small size the compiler should see as a constant: a state width, a node count)
+is chosen in Python, and each value gets its own compiled kernel, made by a factory:
+
+    @kernel_factory
+    def _embed(d):                              # d: a literal int (or None: read at run time)
+        def embed(F, F3):                       # the kernel's body, d a constant in it
+            for p in range(len(F)):
+                for i in range(3):
+                    for j in range(3):
+                        F3[p, i, j] = F[p, i, j] if i < d and j < d else (1.0 if i == j else 0.0)
+        return embed
+
+    def embed(F):                               # the Python entry point picks the kernel
+        F3 = np.empty((len(F), 3, 3))
+        _embed(F.shape[1])(F, F3)
+        return F3
+
+``_embed(2)`` compiles (once per process, memoised) the inner function, a closure over d = 2,
+with ``njit(cache=True)``: its ``range(d)`` loops see a constant (unrolled), and its ``if d ==
+2:`` branches, with those of the ``inline="always"`` helpers it calls (given d), are pruned before
+typing: a kernel holds the code of its own dimension only. numba keys a closure's cache entry on
+its cells' contents (here d), so each d is cached on disk apart. Rules:
+
+- the body lives in the inner function itself, not in an ``inline="always"`` helper it calls:
+  numba copies an inlined function's IR at a cost that grows as its size squared (the ~500
+  blocks of a face pass took 44 s);
+- the closure's free variables are plain ints (or None), never functions or arrays (a dispatcher
+  does not pickle the same in every process: the cache would never hit); the functions it calls
+  are module globals;
+- call the factory from Python (entry points keep their names and signatures), never from
+  compiled code;
+- sizes not worth a kernel of their own map to None, e.g. ``(nb, nc) if nb in (4, 9) else (None,
+  None)``, and the factory then returns a body that reads them from the arrays.
+
+The notice
+----------
+`compile_notice` (a context manager around a run) prints one line on stderr the first time a
+kernel of this package is actually compiled, i.e. only when the cache misses.
+"""
+import functools
+import hashlib
+import importlib.util
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numba
+from numba import njit
+from numba.core import config, event
+from numba.core.caching import CacheImpl, _CacheLocator
+
+PACKAGE = __name__.rpartition(".")[0]           # "skdgmpm"
+SUBPACKAGES = ("materials", "forms")            # with kernels or inlined code (cases/: scenes, meshes)
+
+
+@functools.lru_cache(maxsize=None)
+def package_folders():
+    """{absolute folder: package name} of the package and its subpackages, wherever installed."""
+    folders = {str(Path(__file__).resolve().parent): PACKAGE}
+    for sub in SUBPACKAGES:
+        try:
+            spec = importlib.util.find_spec(f"{PACKAGE}.{sub}")
+        except ImportError:
+            spec = None
+        for path in (spec.submodule_search_locations or []) if spec else []:
+            folders.setdefault(str(Path(path).resolve()), f"{PACKAGE}.{sub}")
+    return folders
+
+
+@functools.lru_cache(maxsize=None)
+def source_digest():
+    """Hash of every source file of the package (by its name within the package) and of the numba
+    version: the same for every environment that installs the same sources."""
+    digest = hashlib.sha256(f"numba {numba.__version__}\n".encode())
+    for folder, name in sorted(package_folders().items(), key=lambda item: item[1]):
+        for path in sorted(Path(folder).glob("*.py")):
+            digest.update(f"{name}/{path.name}\n".encode())
+            digest.update(path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def cache_base():
+    """$NUMBA_CACHE_DIR if set, else $XDG_CACHE_HOME/skdgmpm or ~/.cache/skdgmpm."""
+    if config.CACHE_DIR:
+        return config.CACHE_DIR
+    return os.path.join(os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"),
+                        "skdgmpm")
+
+
+def cache_dir():
+    """The directory of this package's kernels: <base>/kernels-<source digest>."""
+    return os.path.join(cache_base(), f"kernels-{source_digest()}")
+
+
+class Locator(_CacheLocator):
+    """numba's cache locator for this package's own files (see the module's docstring)."""
+
+    def __init__(self, py_func, package):
+        self._lineno = py_func.__code__.co_firstlineno
+        self._cache_path = os.path.join(cache_dir(), package)
+
+    def get_cache_path(self):
+        return self._cache_path
+
+    def get_source_stamp(self):
+        return source_digest()
+
+    def get_disambiguator(self):
+        return str(self._lineno)
+
+    @classmethod
+    def from_function(cls, py_func, py_file):
+        package = package_folders().get(os.path.dirname(os.path.realpath(py_file)))
+        if package is None:                     # not this package's file: numba's own locators
+            return None
+        self = cls(py_func, package)
+        try:
+            self.ensure_cache_path()
+        except OSError:                         # not writable: numba's own locators
+            return None
+        return self
+
+
+def install():
+    """Make numba consult `Locator` first (idempotent); it claims this package's files only."""
+    if Locator not in CacheImpl._locator_classes:
+        CacheImpl._locator_classes = [Locator] + list(CacheImpl._locator_classes)
+
+
+# ---------------------------------------------------------------- one kernel per literal size
+def kernel_factory(factory):
+    """``factory(*sizes)`` returns a Python function closing over the literal ``sizes`` (ints or
+    None); the decorated name, called with the sizes, returns it compiled (``njit(cache=True)``),
+    one kernel per distinct sizes, memoised. See the module's docstring."""
+    kernels = {}
+
+    @functools.wraps(factory)
+    def kernel(*sizes):
+        try:
+            return kernels[sizes]
+        except KeyError:
+            k = kernels[sizes] = njit(cache=True)(factory(*sizes))
+            return k
+
+    kernel.kernels = kernels
+    return kernel
+
+
+# ---------------------------------------------------------------- the first run's notice
+# CPU seconds to compile a scene's kernels from a cold cache, per method and dimension, on the
+# reference 2-core machine (dgmpm 1D: bar_elastic_1d, 73 s; ader-dgmpm 2D: P = 3, 69 s; the others
+# estimated alike); the notice says the last one measured on this machine instead
+# (<base>/compile_seconds.json) where there is one.
+EXPECTED_S = {"dgmpm": {1: 75, 2: 80}, "mpm": {1: 50, 2: 60}, "rk-dgfem": {1: 70, 2: 70},
+              "ader-dgfem": {1: 75, 2: 70}, "ader-dgmpm": {1: 75, 2: 70}}
+
+
+def _measured_path():
+    return os.path.join(cache_base(), "compile_seconds.json")
+
+
+def _measured():
+    try:
+        with open(_measured_path()) as f:
+            return json.load(f)
+    except (OSError, ValueError):
+        return {}
+
+
+class compile_notice(event.Listener):
+    """A context manager around a run (re-enterable): within, the first time one of this
+    package's kernels is compiled (the cache lacks it), print "compiling kernels for <method>, <d>D
+    (first run, about N s; cached afterwards in <dir>)" on ``stream`` (stderr); nothing when every
+    kernel comes from the cache. ``seconds``: the CPU time spent compiling within, remembered as
+    the next estimate for this method and dimension."""
+
+    def __init__(self, method, d, stream=None):
+        self.what, self.stream = f"{method}, {d}D", stream
+        self.expected = EXPECTED_S.get(method, {}).get(d)
+        self.shown, self.depth, self.seconds, self._start = False, 0, 0.0, 0.0
+
+    def __enter__(self):
+        event.register("numba:compile", self)
+        return self
+
+    def __exit__(self, *exc):
+        event.unregister("numba:compile", self)
+        self.depth = 0
+        if self.shown and self.seconds > 1:         # remember how long it took (best effort)
+            try:
+                measured = {**_measured(), self.what: round(self.seconds)}
+                with open(_measured_path(), "w") as f:
+                    json.dump(measured, f, indent=1)
+            except OSError:
+                pass
+
+    def on_start(self, ev):
+        self.depth += 1
+        if self.depth > 1:
+            return
+        self._start = time.process_time()
+        module = getattr(getattr(ev.data.get("dispatcher"), "py_func", None), "__module__", "") or ""
+        if not self.shown and (module == PACKAGE or module.startswith(PACKAGE + ".")):
+            self.shown = True
+            expected = _measured().get(self.what, self.expected)
+            about = f"about {expected} s; " if expected else ""
+            from tqdm import tqdm               # clears a progress bar on the stream, then redraws it
+            tqdm.write(f"compiling kernels for {self.what} (first run, {about}cached afterwards in {cache_dir()})",
+                       file=self.stream or sys.stderr)
+
+    def on_end(self, ev):
+        self.depth -= 1
+        if self.depth == 0:
+            self.seconds += time.process_time() - self._start
