@@ -7,32 +7,27 @@ from numba import njit
 
 from skdgmpm.materials.points import law_table, stress_update_point
 
+from .kernel_cache import kernel_factory
 from .system import embed, scratch
 
 
-@njit(cache=True)
-def _states(laws, params, index, U, rho, h_n, h, Q):
-    d = 2 if U.shape[1] == 6 else (1 if U.shape[1] == 2 else 3)
-    if d == 2:                          # a literal d: the loops unrolled
-        _states_d(laws, params, index, U, rho, h_n, h, Q, 2)
-    else:
-        _states_d(laws, params, index, U, rho, h_n, h, Q, d)
-
-
-@njit(cache=True, inline="always")
-def _states_d(laws, params, index, U, rho, h_n, h, Q, d):
+@kernel_factory
+def _states(d):                         # a literal d: the loops unrolled
     dd = d * d
-    F, P = scratch((3, 3)), scratch((d, d))
-    for k in range(len(U)):
-        for i in range(3):
-            for a in range(3):
-                F[i, a] = U[k, i * d + a] if i < d and a < d else (1.0 if i == a else 0.0)
-        m = index[k]
-        stress_update_point(laws[m], params[m], F, h_n[k], h[k], P, d)
-        for i in range(d):
-            for a in range(d):
-                Q[k, i * d + a] = P[i, a]
-            Q[k, dd + i] = U[k, dd + i] / rho[k]
+
+    def states(laws, params, index, U, rho, h_n, h, Q):
+        F, P = scratch((3, 3)), scratch((d, d))
+        for k in range(len(U)):
+            for i in range(3):
+                for a in range(3):
+                    F[i, a] = U[k, i * d + a] if i < d and a < d else (1.0 if i == a else 0.0)
+            m = index[k]
+            stress_update_point(laws[m], params[m], F, h_n[k], h[k], P, d)
+            for i in range(d):
+                for a in range(d):
+                    Q[k, i * d + a] = P[i, a]
+                Q[k, dd + i] = U[k, dd + i] / rho[k]
+    return states
 
 
 @dataclass(frozen=True)
@@ -88,8 +83,8 @@ class MaterialSet:
         if history is None:
             history = self.initial_history(np.asarray(index)) if self.n_history else np.empty((len(U), 0))
         Q, h = np.empty(U.shape), np.empty_like(history)
-        _states(*self.laws, np.asarray(index, dtype=np.int64), U, np.asarray(rho, dtype=float),
-                history, h, Q)
+        d = {2: 1, 6: 2, 12: 3}[U.shape[1]]
+        _states(d)(*self.laws, np.asarray(index, dtype=np.int64), U, np.asarray(rho, dtype=float), history, h, Q)
         return Q, h
 
     def state(self, U, index, rho, history=None):

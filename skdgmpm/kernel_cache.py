@@ -12,8 +12,8 @@ only (`install`; every other file keeps numba's own locators), files every kerne
 
     <base>/kernels-<digest>/<package>/        (<package>: skdgmpm, skdgmpm.materials, ...)
 
-where <digest> hashes every source file of the package by its name within the package, and the
-numba version; the digest is also each kernel's source stamp. An edit anywhere in the package
+where <digest> hashes every source file of the package that compiles code (by its name within
+the package), and the numba version; the digest is also each kernel's source stamp. An edit anywhere in the package
 thus compiles afresh, and every environment with the same sources and numba version shares one
 cache, wherever it is installed. <base>: $NUMBA_CACHE_DIR if set, else $XDG_CACHE_HOME/skdgmpm or
 ~/.cache/skdgmpm; where it cannot be written, numba's own locators take over. Nothing global is
@@ -67,6 +67,7 @@ import hashlib
 import importlib.util
 import json
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -94,15 +95,23 @@ def package_folders():
     return folders
 
 
+# A source that compiles something: only these can put code into a kernel (a compiled function
+# reads the globals of its own module and calls compiled functions of other such modules).
+_COMPILES = re.compile(rb"@njit|njit\(|@kernel_factory|@intrinsic")
+
+
 @functools.lru_cache(maxsize=None)
 def source_digest():
-    """Hash of every source file of the package (by its name within the package) and of the numba
-    version: the same for every environment that installs the same sources."""
+    """Hash of the package's source files that compile code (`_COMPILES`; by their names within
+    the package) and of the numba version: the same for every environment that installs the same
+    sources; an edit of the Python-only files (command line, scenes, outputs) keeps the kernels."""
     digest = hashlib.sha256(f"numba {numba.__version__}\n".encode())
     for folder, name in sorted(package_folders().items(), key=lambda item: item[1]):
         for path in sorted(Path(folder).glob("*.py")):
-            digest.update(f"{name}/{path.name}\n".encode())
-            digest.update(path.read_bytes())
+            text = path.read_bytes()
+            if _COMPILES.search(text):
+                digest.update(f"{name}/{path.name}\n".encode())
+                digest.update(text)
     return digest.hexdigest()[:16]
 
 

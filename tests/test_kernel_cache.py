@@ -1,6 +1,6 @@
 """The compiled kernels' disk cache (`skdgmpm.kernel_cache`): keyed on every source file of the
-package, so that an edit of a file whose functions a kernel inlines (materials/*.py, riemann.py)
-compiles afresh, and the same for every environment that installs the same sources; importing
+package that compiles code, so that an edit of a file whose functions a kernel inlines
+(materials/*.py, riemann.py) compiles afresh while an edit of a Python-only file (cli.py) does not, and the same for every environment that installs the same sources; importing
 the package changes no global setting; the first run says when it compiles."""
 import json
 import os
@@ -84,6 +84,9 @@ def test_every_environment_with_the_same_sources_shares_the_cache_and_an_edit_ch
     law.write_text(law.read_text() + "\n# edited\n")
     edited, _ = python(DIGEST, cwd=tmp_path, pythonpath=site)
     assert edited[0] != here[0] and edited[1] != here[1]
+    cli = site / "skdgmpm" / "cli.py"                                    # no compiled code in it
+    cli.write_text(cli.read_text() + "\n# edited\n")
+    assert python(DIGEST, cwd=tmp_path, pythonpath=site)[0][0] == edited[0]
 
 
 PER_D = ("import json, numpy as np; from skdgmpm import system, riemann\n"
