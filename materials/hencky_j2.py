@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from skdgmpm.system import scratch
+from skdgmpm.kernel_cache import scratch
 
 from . import neo_hookean
 from .base import _inverse_transpose, admissible_inverse

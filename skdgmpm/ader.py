@@ -36,14 +36,15 @@ from skdgmpm.materials.points import law_table
 from . import system
 from .ader_kernels import interior_flux_sum, traces
 from .dgfem import DGFEM
-from .kernel_cache import kernel_factory
+from .equations import add_flux
+from .kernel_cache import kernel_factory, scratch
 from .riemann import _not_hyperbolic
+from .scheme import stage
 
 
 def _divergence_cells(Q, D, out):
     """out[r, c] = sum_alpha D[alpha, c] F_alpha(Q[r, c]) for per-cell point values Q (R, nel, n, nc)
-    and derivative matrices D (d, nel, n, n): F-rows (i, alpha) get -D_alpha v_i, p-rows
-    -sum_alpha D_alpha P_i,alpha."""
+    and derivative matrices D (d, nel, n, n)."""
     d, n = D.shape[0], Q.shape[2]
     # literal sizes, the loops unrolled: d always, n for Q1 and Q2 cells in 2D (2 x 2, 3 x 3 points)
     _divergence_cells_kernel(d, n if d == 2 and n in (4, 9) else None)(Q, D, out)
@@ -62,21 +63,23 @@ def _divergence_cells_kernel(d, n):
 
 @njit(cache=True, inline="always")
 def _divergence_cells_dn(Q, D, out, d, n):
-    dd = d * d
+    nc = d * d + d
+    s, o = scratch((nc,)), scratch((nc,))
     for b in range(Q.shape[0]):
         for c in range(Q.shape[1]):
             for k in range(n):
-                for i in range(d):
-                    out[b, c, k, dd + i] = 0.0
-                for a in range(d):
-                    for i in range(d):
-                        sv, sP = 0.0, 0.0
-                        for m in range(n):
-                            w = D[a, c, k, m]
-                            sv += w * Q[b, c, m, dd + i]
-                            sP += w * Q[b, c, m, i * d + a]
-                        out[b, c, k, i * d + a] = -sv
-                        out[b, c, k, dd + i] -= sP
+                for v in range(nc):
+                    o[v] = 0.0
+                for a in range(d):          # F_alpha is linear: applied to the weighted sum
+                    for v in range(nc):
+                        s[v] = 0.0
+                    for m in range(n):
+                        w = D[a, c, k, m]
+                        for v in range(nc):
+                            s[v] += w * Q[b, c, m, v]
+                    add_flux(s, a, 1.0, o, d)
+                for v in range(nc):
+                    out[b, c, k, v] = o[v]
 
 
 def _picard_update(U0, T, div, dt, scale, u_hat, new):
@@ -193,8 +196,8 @@ class ADERDGFEM(DGFEM):
     picard_tol: float = 1e-12
     picard_max: int = 0                     # 0: 2P + 2
     picard_guess: str = "taylor"            # or "constant" (u_hat = U^n at every time node)
-    stages: tuple = ("time_step", "predictor", "volume_flux", "boundary_flux", "interface_flux",
-                     "source", "corrector", "evaluate_points")
+    stages: tuple = ("time_step", "advance", "predictor", "corrector", "surface_integral", "boundary_states",
+                     "source", "limit", "evaluate_points", "check")
     picard: PicardStats = field(default_factory=PicardStats, init=False)
 
     def __post_init__(self):
@@ -259,6 +262,7 @@ class ADERDGFEM(DGFEM):
             return None
         return np.stack([self.source(points, time + tau * dt) for tau in self.tau])
 
+    @stage
     def predictor(self, U_points, dt, source=None, Q_points=None):
         """Space-time predictor: (u_hat, q_hat) of shape (P+1, nel, nq, nc) and the iterations;
         ``source`` (P+1, n_points, nc) from `space_time_source` at the Gauss points; ``Q_points``
@@ -300,6 +304,7 @@ class ADERDGFEM(DGFEM):
         return u_hat, law(u_hat)
 
     # ---------------------------------------------------------------- corrector
+    @stage
     def corrector(self, dofs, u_hat, q_hat, time, dt, source=None):
         """u^{n+1} = u^n + dt M^-1 sum_s w_s (R(q_hat(tau_s)) + int Phi S(tau_s)) (L23 eq 28-33);
         returns it and the boundary work. u_hat, q_hat: (P+1, ..., nc) at the predictor's points;
@@ -314,6 +319,7 @@ class ADERDGFEM(DGFEM):
             R += self.source_integral(_time_sum(self.w_tau, source))
         return self.limit(dofs + dt * self.apply_mass_inverse(R)), work
 
+    @stage
     def surface_integral(self, u_hat, q_hat, time, dt, R):
         """-int Phi sum_s w_s F_N*(tau_s) over all faces added to R; returns the boundary work. One
         compiled pass over the interior faces for every time node (`ader_kernels`), then the
@@ -341,6 +347,7 @@ class ADERDGFEM(DGFEM):
         b.integrate(flux, "L", R, sign=-1.0)
         return work
 
+    @stage
     def advance(self, U, time, dt, Q_points=None):
         S = self.space_time_source(self.gauss, time, dt)       # predictor and corrector share it
         u_hat, q_hat = self.predictor(self.B @ U, dt, S, Q_points)

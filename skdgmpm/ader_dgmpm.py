@@ -24,7 +24,7 @@ from .ader import ADERDGFEM
 from .errors import InputError
 from .mls import shape_functions
 from .quadrature import cell_slots, interpolation_matrix, particle_basis
-from .scheme import GodunovScheme, cell_values
+from .scheme import GodunovScheme, cell_values, stage
 
 BACKMAPS = ("pic", "flip")
 
@@ -36,6 +36,8 @@ class ADERDGMPM(ADERDGFEM):
     particles_in: object = None
     mls_order: int = -1
     backmap: str = "pic"
+    stages: tuple = ("project_particles", "time_step", "predictor", "corrector", "surface_integral", "boundary_states",
+                     "source", "limit", "back_map", "constitutive_update", "check")
 
     def __post_init__(self):
         if self.backmap not in BACKMAPS:
@@ -118,6 +120,7 @@ class ADERDGMPM(ADERDGFEM):
         out[self.slot] = values
         return out.reshape((self.basis.dx.shape[0], self.n_max) + values.shape[1:])
 
+    @stage
     def predictor(self, U_slots, dt, source=None, Q_slots=None):
         """Space-time predictor with dofs at the particles: (u_hat, q_hat) (P+1, nel, n_max, nc) on
         the padded slots from U on them (nel, n_max, nc) (and the law there, Q_slots, if known);
@@ -134,23 +137,31 @@ class ADERDGMPM(ADERDGFEM):
         return Q
 
     # ---------------------------------------------------------------- corrector and back-map
+    @stage
+    def project_particles(self, U_slots):
+        """The grid image of the MLS field of the particles' U: its L2 projection onto the DG space."""
+        return self.project(self.E_gauss @ U_slots.reshape(-1, U_slots.shape[-1]))
+
+    @stage
+    def back_map(self, state, dofs, dofs_n):
+        """U at the particles from the corrected dofs: PIC (S dofs) or FLIP (U_p + S (dofs - dofs_n))."""
+        if self.backmap == "pic":
+            return self.S @ dofs
+        return state.U + self.S @ (dofs - dofs_n)
+
     def step(self, state, dt_max=np.inf):
         U_slots, Q_slots = self._padded(state.U), self._padded(state.Q)       # Q: the law at t_n
         if self.materials.n_history:            # the particles' history of t_n on the padded slots
             virgin = self.materials.initial_history(self.slot_cell * 0)       # padding: a virgin state
             virgin[self.slot] = state.history
             self.history_n = virgin
-        dofs_n = self.project(self.E_gauss @ U_slots.reshape(-1, U_slots.shape[-1]))  # grid image of the MLS field
+        dofs_n = self.project_particles(U_slots)
 
         def attempt(dt):
             u_hat, q_hat = self.predictor(U_slots, dt, self.space_time_source(self.particles, state.t, dt), Q_slots)
             dofs, work = self.corrector(dofs_n, u_hat, q_hat, state.t, dt,
                                         self.space_time_source(self.gauss, state.t, dt))
-            if self.backmap == "pic":
-                U = self.S @ dofs
-            else:
-                U = state.U + self.S @ (dofs - dofs_n)
-            return self.constitutive_update(state, U, dt), work
+            return self.constitutive_update(state, self.back_map(state, dofs, dofs_n), dt), work
 
         return self.step_with_cfl_guard(state, dt_max, attempt)
 

@@ -23,6 +23,7 @@ import statistics
 import time
 
 from .errors import InputError
+from .integrators import EVALUATIONS
 from .study import L23_LAYOUT
 
 # the plate impact of R18 §7.4 on a square plate: lower quarter of the left face driven at
@@ -47,7 +48,6 @@ for _p in (1, 2, 3):
 J2 = ['material.law="j2_plasticity"', "material.sigma_y=4e8", "material.H=1e10"]
 METHODS["dgmpm-ctu-j2"] = [*METHODS["dgmpm-ctu"], *J2]
 METHODS["ader-dgmpm-1-j2"] = [*METHODS["ader-dgmpm-1"], *J2]
-STAGES = {"euler": 1, "rk2": 2, "rk4": 4}
 
 
 def _measure(method, n, steps, warmup):
@@ -69,15 +69,18 @@ def _measure(method, n, steps, warmup):
     stepper, state = disc.stepper, disc.initial
     times, cpu = [], []
     for k in range(warmup + steps):
+        if k == warmup:
+            stepper.stage_times(reset=True)     # the timed steps' stages only
         t0, c0 = time.perf_counter(), time.process_time()
         state = stepper.step(state)
         if k >= warmup:
             times.append(time.perf_counter() - t0)
             cpu.append(time.process_time() - c0)
     step = statistics.median(times)
+    per_stage = {name: seconds / steps for name, (seconds, _) in stepper.stage_times().items()}
     cells = int(stepper.grid.submesh.nelements)
     dofs = len(disc.particles) if method.startswith("mpm") else int(stepper.n_dofs)
-    stages = STAGES.get(stepper.integrator, 1)
+    stages = EVALUATIONS.get(stepper.integrator, 1)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss      # KiB on Linux
     return {"method": method, "cells": cells, "particles": len(disc.particles), "dofs": dofs,
             "startup_s": startup, "setup_s": setup, "step_s": step, "setup_in_steps": setup / step,
@@ -85,7 +88,8 @@ def _measure(method, n, steps, warmup):
             "cpu_us_per_cell_step": 1e6 * statistics.median(cpu) / cells, "s_per_dof_step": step / dofs,
             "s_per_dof_stage": step / dofs / stages, "particles_per_s": len(disc.particles) / step,
             "peak_MiB": peak / 1024, "peak_over_base_MiB": (peak - base_rss) / 1024,
-            "bytes_per_cell": 1024 * (peak - base_rss) / cells}
+            "bytes_per_cell": 1024 * (peak - base_rss) / cells,
+            "stage_s": per_stage}                   # mean wall time per step of each stage (its own)
 
 
 def _child(queue, *args):
@@ -128,6 +132,19 @@ def format_table(rows):
                      f"{r['us_per_cell_step']:>9.2f}{1e9 * r['s_per_dof_step']:>8.0f}"
                      f"{r['cpu_us_per_cell_step']:>12.2f}{1e9 * r['s_per_dof_stage']:>13.0f}{r['particles_per_s']:>12.3g}"
                      f"{r['peak_MiB']:>10.0f}{r['setup_in_steps']:>11.1f}")
+    return "\n".join(lines)
+
+
+def format_stages(rows):
+    """Per row, each stage's share of the step: mean ms per step and percent of the stages' sum."""
+    lines = []
+    for r in rows:
+        stages = r.get("stage_s")
+        if not stages:
+            continue
+        total = sum(stages.values())
+        parts = ", ".join(f"{name} {1e3 * s:.2f} ms ({100 * s / total:.0f}%)" for name, s in stages.items())
+        lines.append(f"{r['method']} {r['cells']} cells: {parts}")
     return "\n".join(lines)
 
 

@@ -131,6 +131,7 @@ def _cmd_bench(args):
     m = bench.machine()
     print(f"{m['processor']}, {m['cpus']} CPUs, Python {m['python']}")
     print(bench.format_table(rows))
+    print("\nstages (own wall time per step):\n" + bench.format_stages(rows))
     return 0
 
 

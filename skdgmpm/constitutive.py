@@ -7,8 +7,9 @@ from numba import njit
 
 from skdgmpm.materials.points import law_table, stress_update_point
 
-from .kernel_cache import kernel_factory
-from .system import embed, scratch
+from .equations import embed as _embed_point
+from .kernel_cache import kernel_factory, scratch
+from .system import embed
 
 
 @kernel_factory
@@ -18,9 +19,7 @@ def _states(d):                         # a literal d: the loops unrolled
     def states(laws, params, index, U, rho, h_n, h, Q):
         F, P = scratch((3, 3)), scratch((d, d))
         for k in range(len(U)):
-            for i in range(3):
-                for a in range(3):
-                    F[i, a] = U[k, i * d + a] if i < d and a < d else (1.0 if i == a else 0.0)
+            _embed_point(U[k], F, d)
             m = index[k]
             stress_update_point(laws[m], params[m], F, h_n[k], h[k], P, d)
             for i in range(d):

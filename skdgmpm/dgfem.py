@@ -20,14 +20,16 @@ from skfem import (CellBasis, ElementDG, ElementLineP1, ElementLineP2, ElementQu
 
 from . import forms, system
 from .elements import ElementLineLagrange
+from .equations import add_flux
 from .errors import InputError
 from .faces import interior_faces
+from . import integrators
 from .kernel_cache import kernel_factory
 from .limiter import SlopeLimiter
 from .particles import Particles
-from .scheme import GodunovScheme, GridState, ParticleState, advance_positions
+from .scheme import GodunovScheme, GridState, ParticleState, advance_positions, stage
 
-INTEGRATORS = ("rk2", "rk4")
+INTEGRATORS = ("rk2", "rk4")        # Euler is unstable for DG of degree >= 1
 
 
 def _apply_blocks(blocks, cell_dofs, R, out):
@@ -62,18 +64,13 @@ def _apply_blocks_n(blocks, cell_dofs, R, out, nb, nc):
 
 
 @kernel_factory
-def _volume_term(d):                    # a literal d: the loops unrolled
+def _volume_term(d):
     def volume_term(indptr, indices, data, Q, alpha, out):
         """out += D^T F_alpha(Q) for one CSR D (n_points, n_dofs) of weighted derivatives
-        dPhi/dX_alpha, scattered in point order as scipy's D.T @ F is: F-columns (j, alpha) get
-        -v_j, p-columns -P_j,alpha (no flux array is built)."""
-        dd = d * d
+        dPhi/dX_alpha, scattered in point order as scipy's D.T @ F is (no flux array is built)."""
         for q in range(len(indptr) - 1):
             for k in range(indptr[q], indptr[q + 1]):
-                i, w = indices[k], data[k]
-                for j in range(d):
-                    out[i, j * d + alpha] += w * -Q[q, dd + j]
-                    out[i, dd + j] += w * -Q[q, j * d + alpha]
+                add_flux(Q[q], alpha, data[k], out[indices[k]], d)
     return volume_term
 
 
@@ -114,8 +111,8 @@ class DGFEM(GodunovScheme):
     order: int = 1
     cfl: float = 0.5
     integrator: str = "rk2"
-    stages: tuple = ("time_step", "volume_flux", "boundary_flux", "interface_flux", "source", "advance",
-                     "evaluate_points")
+    stages: tuple = ("time_step", "advance", "gauss_state", "boundary_flux", "boundary_states", "interface_flux",
+                     "volume_flux", "source", "limit", "evaluate_points", "check")
     external_work: float = field(default=0.0, init=False)
     transverse: str = "none"
     limiter: str = "none"
@@ -182,6 +179,7 @@ class DGFEM(GodunovScheme):
         """Q from U pointwise: P = P(F, history) with each cell's law, v = p / rho0."""
         return self.materials.state(U, self.cell_material[cells], rho, history)
 
+    @stage
     def gauss_state(self, U_dofs):
         """Q at the Gauss points from the dofs, with the internal variables of t_n there."""
         return self.point_state(self.B @ U_dofs, self.gauss.cell, self.gauss.rho0, self.history_n)
@@ -203,6 +201,7 @@ class DGFEM(GodunovScheme):
         """sum_q w_q dPhi/dX_alpha F_alpha(Q(X_q)), the law evaluated at the Gauss points."""
         return self.volume_flux_points(self.gauss_state(U_dofs))
 
+    @stage("volume_flux")
     def volume_flux_points(self, Q):
         """The volume term from Q at the Gauss points (n_points, ncomp)."""
         R = np.zeros((self.n_dofs, Q.shape[1]))
@@ -230,24 +229,24 @@ class DGFEM(GodunovScheme):
             R += self.source_integral(self.source(self.gauss, time))
         return self.apply_mass_inverse(R), power
 
+    @stage
     def limit(self, dofs):
         """The slope limiter (L23 §3.3), when the scene switches it on."""
         out, n = self.slope_limiter(dofs)
         self.limited_cells += n
         return out
 
+    @stage
     def advance(self, U, time, dt):
-        """TVD-RK2 (Heun) or classical RK4, limiting every stage; returns dofs and boundary work."""
-        k1, p1 = self.rate(U, time, dt)
-        if self.integrator == "rk2":
-            U1 = self.limit(U + dt * k1)
-            k2, p2 = self.rate(U1, time + dt, dt)
-            return self.limit(0.5 * (U + U1 + dt * k2)), 0.5 * dt * (p1 + p2)
-        k2, p2 = self.rate(self.limit(U + 0.5 * dt * k1), time + 0.5 * dt, dt)
-        k3, p3 = self.rate(self.limit(U + 0.5 * dt * k2), time + 0.5 * dt, dt)
-        k4, p4 = self.rate(self.limit(U + dt * k3), time + dt, dt)
-        return self.limit(U + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)), dt / 6 * (p1 + 2 * p2 + 2 * p3 + p4)
+        """TVD-RK2 (Heun) or classical RK4 (`skdgmpm.integrators`), limiting every stage's result;
+        returns dofs and boundary work."""
+        def rk_stage(U_eval, base, t, step):
+            k, power = self.rate(U_eval, t, dt)
+            return self.limit(base + step * k), power
 
+        return integrators.INTEGRATORS[self.integrator](rk_stage, U, time, dt)
+
+    @stage
     def evaluate_points(self, state, dofs, dt):
         """State at the Gauss points from the dofs; positions advanced with the new velocity."""
         U = self.B @ dofs

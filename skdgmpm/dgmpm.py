@@ -31,9 +31,10 @@ from . import system
 from .dgmpm_kernels import boundary_pass, boundary_sides, euler_update, integrate_faces, interior_pass
 from .errors import InputError
 from .faces import interior_faces
+from .integrators import INTEGRATORS
 from .quadrature import ParticleMap, VolumeOperators, interpolation_matrix, particle_basis
 from .riemann import _not_hyperbolic
-from .scheme import GodunovScheme, GridState, cell_values
+from .scheme import GodunovScheme, GridState, cell_values, stage
 
 
 @dataclass
@@ -58,8 +59,8 @@ class DGMPM(GodunovScheme):
     integrator: str = "euler"
     transverse: str = "dcu"
     body_force: object = None
-    stages: tuple = ("project", "time_step", "volume_flux", "boundary_flux", "interface_flux",
-                     "transverse_flux", "source", "advance", "back_map", "constitutive_update")
+    stages: tuple = ("project", "time_step", "advance", "volume_flux", "interface_flux", "boundary_flux",
+                     "transverse_flux", "source", "nodal_state", "back_map", "constitutive_update", "check")
     external_work: float = field(default=0.0, init=False)
     _kept: tuple = field(default=None, init=False, repr=False)   # (projected state, its fixed_terms)
 
@@ -135,16 +136,19 @@ class DGMPM(GodunovScheme):
         self.ctu = self._boundary_filter(frame, free_v, free_t)
 
     # ---------------------------------------------------------------- stages
+    @stage
     def project(self, state):
         """(a) M_i U_i = sum_p S_ip V_p U_p; Q likewise (v from the projected momentum)."""
         grid_state = GridState(*self.map.project_state(state.U, state.Q, self.d))
         self._kept = (grid_state, None)           # its Delta t-free terms, once computed
         return grid_state
 
+    @stage
     def volume_flux(self, grid_state, out=None):
         """(c) sum_alpha K^alpha F_alpha(Q) (added to ``out`` if given)."""
         return system.volume_flux(grid_state.Q, self.stiffness, out)
 
+    @stage
     def interface_flux(self, grid_state):
         """(e) Godunov fluxes at interior faces from the linearised Riemann solver with (CTU) the
         transverse corrections of both sides' fluctuations, in one compiled pass. Returns the
@@ -159,6 +163,7 @@ class DGMPM(GodunovScheme):
             _not_hyperbolic(bad)
         return flux, corr, corr_bnd
 
+    @stage
     def boundary_flux(self, grid_state, time, dt, weight, R, corr_bnd):
         """(d) ghost states -> boundary stationary states (t*, v*) and fluxes (nb, nc), with (CTU)
         the transverse corrections of the fluctuations entering the boundary cells (into R at
@@ -182,6 +187,7 @@ class DGMPM(GodunovScheme):
             _not_hyperbolic(bad)
         return flux, t_s, v_s
 
+    @stage
     def transverse_flux(self, corr_bnd):
         """CTU [R18 eq 34-37] at boundary faces: keep the components of the corrections that the
         condition leaves free, so it still holds exactly. (Each fluctuation entering a cell is split
@@ -251,19 +257,17 @@ class DGMPM(GodunovScheme):
         power = self.add_boundary_terms(grid_state, time, dt, corr_bnd, weight, out)
         return out, power
 
+    @stage
     def advance(self, grid_state, time, dt):
-        """(f) forward Euler [R18 eq 20] or Heun's RK2, both stages on the grid."""
-        # Euler takes boundary values at mid-step (the step's mean for a ramp; a release at
-        # t_u = n dt is not missed through round-off in t); Heun at its stage times
-        U = grid_state.U
-        if self.integrator == "euler":
-            U1, power = self.euler_stage(grid_state, U, time + 0.5 * dt, dt, dt)
-            return U1, dt * power
-        U1, power = self.euler_stage(grid_state, U, time, dt, dt)
-        # 0.5 (U + U1 + dt M^-1 R2)
-        U2, power2 = self.euler_stage(self.nodal_state(U1), 0.5 * (U + U1), time + dt, dt, 0.5 * dt)
-        return U2, 0.5 * dt * (power + power2)
+        """(f) forward Euler [R18 eq 20] or Heun's RK2 (`skdgmpm.integrators`), every stage on
+        the grid: the first from the projected state, the second's law at the grid nodes."""
+        def euler_stage(U, base, t, step):
+            at = grid_state if U is grid_state.U else self.nodal_state(U)
+            return self.euler_stage(at, base, t, dt, step)
 
+        return INTEGRATORS[self.integrator](euler_stage, grid_state.U, time, dt)
+
+    @stage
     def nodal_state(self, U):
         """Q at the nodes from U at the nodes (the law evaluated at nodes, RK2 second stage)."""
         d = self.d
@@ -271,6 +275,7 @@ class DGMPM(GodunovScheme):
         P = self.materials.stress(F, self.cell_material[self.dof_cell])
         return GridState(U, system.primitive(P, p, self.map.rho))
 
+    @stage
     def back_map(self, U_nodes):
         """(g) U_p = sum_i S_ip U_i [R18 eq 40] (PIC)."""
         return self.map.interpolate(U_nodes)

@@ -11,7 +11,8 @@ from numba import njit
 import scipy.sparse as sp
 from skfem import FacetBasis, InteriorFacetBasis
 
-from .kernel_cache import kernel_factory
+from .equations import embed
+from .kernel_cache import kernel_factory, scratch
 
 
 @kernel_factory
@@ -29,23 +30,23 @@ def _integrate(nc):                     # a literal width: the loop unrolled
 
 @njit(cache=True, inline="always")
 def gather_row(trace, f, u, q, q_f, F, d):
-    """Row f of a trace (CSR triple) applied to q (into q_f (nc,)) and to u's F part (into the
-    embedded F (3, 3)), each row's products summed in CSR order as scipy's product does: the
-    side state of one face row, for the compiled face passes."""
+    """Row f of a trace (CSR triple) applied to q (into q_f (nc,)) and to u's F part (embedded into
+    F (3, 3)), each row's products summed in CSR order as scipy's product does: the side state of
+    one face row, for the compiled face passes."""
     indptr, indices, data = trace
     nc = q_f.shape[0]
+    u_f = scratch((d * d,))
     for c in range(nc):
         q_f[c] = 0.0
-    for i in range(3):
-        for a in range(3):
-            F[i, a] = 0.0 if i < d and a < d else (1.0 if i == a else 0.0)
+    for c in range(d * d):
+        u_f[c] = 0.0
     for k in range(indptr[f], indptr[f + 1]):
         n, w = indices[k], data[k]
         for c in range(nc):
             q_f[c] += w * q[n, c]
-        for i in range(d):
-            for a in range(d):
-                F[i, a] += w * u[n, i * d + a]
+        for c in range(d * d):
+            u_f[c] += w * u[n, c]
+    embed(u_f, F, d)
 
 
 def _point_trace(fb):

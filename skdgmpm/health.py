@@ -11,11 +11,10 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from skdgmpm.materials.points import tangent_point
-from .dgmpm_kernels import tangent_call
-from .kernel_cache import kernel_factory
-from .riemann import _acoustic, _acoustic2
-from .system import scratch
+from skdgmpm.materials.points import law_tangent
+
+from .equations import acoustic, embed
+from .kernel_cache import kernel_factory, scratch
 
 
 def directions(d):
@@ -89,9 +88,12 @@ def _assess(d):                         # a literal d: the (d, d) loops unrolled
             for k in range(d * d + d):        # U.shape[1], a literal count
                 ok = ok and np.isfinite(U[p, k]) and np.isfinite(Q[p, k])
             finite[p] = ok
-            for i in range(3):              # embedded F, I where not finite
-                for a in range(3):
-                    F[i, a] = U[p, i * d + a] if ok and i < d and a < d else (1.0 if i == a else 0.0)
+            if ok:
+                embed(U[p], F, d)
+            else:                           # I where not finite
+                for i in range(3):
+                    for a in range(3):
+                        F[i, a] = 1.0 if i == a else 0.0
             if d == 1:
                 J[p] = F[0, 0]
             elif d == 2:
@@ -101,23 +103,18 @@ def _assess(d):                         # a literal d: the (d, d) loops unrolled
                         + F[0, 1] * (F[1, 2] * F[2, 0] - F[1, 0] * F[2, 2])
                         + F[0, 2] * (F[1, 0] * F[2, 1] - F[1, 1] * F[2, 0]))
             m = material[p]
-            if d == 1:
-                tangent_call(laws[m], params[m], F, C, d)
-            else:
-                tangent_point(laws[m], params[m], F, C, d)
+            law_tangent(laws[m], params[m], F, C, d)
             lo, hi = np.inf, -np.inf
             for k in range(len(N)):
+                acoustic(C, N[k], 1.0, A, d)
                 if d == 1:
-                    small = large = C[0, 0, 0, 0] * (N[k][0] * N[k][0])
-                elif d == 2:                # in scalars: no (d, d) scratch round trip
-                    n0, n1 = N[k][0], N[k][d - 1]       # N[k][1] (typed for every d: d - 1)
-                    a00, a11 = _acoustic2(C, 0, 0, n0, n1), _acoustic2(C, 1, 1, n0, n1)
-                    mean = 0.5 * (a00 + a11)
-                    x, y = 0.5 * (a00 - a11), 0.5 * (_acoustic2(C, 0, 1, n0, n1) + _acoustic2(C, 1, 0, n0, n1))
+                    small = large = A[0, 0]
+                elif d == 2:                # eigenvalues of the symmetric part in closed form
+                    mean = 0.5 * (A[0, 0] + A[1, 1])
+                    x, y = 0.5 * (A[0, 0] - A[1, 1]), 0.5 * (A[0, 1] + A[1, 0])
                     r = np.sqrt(x * x + y * y)
                     small, large = mean - r, mean + r
                 else:
-                    _acoustic(C, N[k], 1.0, A, d)
                     omega = np.linalg.eigvalsh(0.5 * (A + A.T))
                     small, large = omega[0], omega[-1]
                 lo = min(lo, small)

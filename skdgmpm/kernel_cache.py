@@ -5,7 +5,7 @@ The cache
 ---------
 numba checks a cached kernel only against its own file (a hash of it) and files it under the
 file's directory path: a kernel that inlines functions of other files (riemann.py,
-materials/*.py, system.scratch) would keep running old code after they are edited, and a second
+materials/*.py, equations.py) would keep running old code after they are edited, and a second
 environment installing the same sources (another venv, another checkout, ``pip install .``)
 would compile everything again. `Locator`, which numba consults first for this package's files
 only (`install`; every other file keeps numba's own locators), files every kernel under
@@ -72,10 +72,13 @@ import sys
 import time
 from pathlib import Path
 
+import llvmlite.ir as ir
 import numba
-from numba import njit
-from numba.core import config, event
+from numba import njit, types
+from numba.core import cgutils, config, event
 from numba.core.caching import CacheImpl, _CacheLocator
+from numba.extending import intrinsic
+from numba.np.numpy_support import carray
 
 PACKAGE = __name__.rpartition(".")[0]           # "skdgmpm"
 SUBPACKAGES = ("materials", "forms")            # with kernels or inlined code (cases/: scenes, meshes)
@@ -180,6 +183,34 @@ def kernel_factory(factory):
 
     kernel.kernels = kernels
     return kernel
+
+
+# ---------------------------------------------------------------- scratch arrays of a kernel
+SCRATCH_SIZE = 81       # entries of a `scratch` array: a (3, 3, 3, 3) tangent
+
+
+@intrinsic
+def _stack_doubles(typingctx):
+    """Pointer to SCRATCH_SIZE doubles on the stack of the compiled function being built."""
+    def codegen(context, builder, signature, args):
+        return cgutils.alloca_once(builder, context.get_value_type(types.float64),
+                                   size=ir.Constant(ir.IntType(64), SCRATCH_SIZE))
+    return types.CPointer(types.float64)(), codegen
+
+
+@njit(cache=True, inline="always")
+def scratch(shape):
+    """Uninitialised float array of ``shape`` (at most SCRATCH_SIZE entries) on the stack of the
+    compiled function that calls it, for the per-point scratch of the compiled loops: unlike
+    ``np.empty`` (heap memory the compiler must assume any other array may alias), its entries
+    stay in registers once the loops over it are unrolled (a literal d). It lives as long as that
+    function's call: never return it or keep it in another object."""
+    n = 1
+    for s in shape:
+        n *= s
+    if n > SCRATCH_SIZE:
+        raise ValueError("scratch: more than SCRATCH_SIZE entries")
+    return carray(_stack_doubles(), shape)
 
 
 # ---------------------------------------------------------------- the first run's notice

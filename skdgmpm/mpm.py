@@ -28,7 +28,7 @@ from . import system
 from .bcs import Mixed, NormalVelocity, Transmissive
 from .errors import InputError
 from .gimp import SHAPES, Lattice, half_lengths, shape_functions
-from .scheme import GodunovScheme, ParticleState
+from .scheme import GodunovScheme, ParticleState, stage
 
 
 @dataclass(frozen=True)
@@ -210,11 +210,13 @@ class MPM(GodunovScheme):
         return particle, (measure / np.bincount(face, minlength=len(facets)).clip(1))[face]
 
     # ---------------------------------------------------------------- stages
+    @stage
     def shape_functions(self, s):
         """S_ip, grad S_ip at the current positions (cpGIMP: l_p from the current F)."""
         lp = half_lengths(self.shape, self.l0, s.F, self.lattice.h)
         s.shape = shape_functions(self.lattice, s.x, self.shape, lp, step=s.step + 1, time=s.t)
 
+    @stage
     def project(self, s):
         """m_i = sum_p S_ip m_p, v_i = sum_p S_ip m_p v_p / m_i (zero on empty nodes)."""
         m = self.particles.mass
@@ -224,12 +226,14 @@ class MPM(GodunovScheme):
         s.filled = s.mass > 0
         s.v_grid = self._per_mass(s, s.shape.S.T @ (m[:, None] * s.v))
 
+    @stage
     def impose_velocity(self, s):
         """Imposed velocity components on the boundary nodes, at mid-step."""
         t = s.t + 0.5 * s.dt
         for nodes, comp, value, schedule in self.constraints:
             s.v_grid[nodes, comp] = value * schedule(t)
 
+    @stage
     def strain_stress(self, s):
         """L_p = sum_i v_i (x) grad S_ip, F <- (I + dt L) F, P = P(F, history) with the history
         of t_n (the particles' internal variables: once per step in every variant)."""
@@ -237,6 +241,7 @@ class MPM(GodunovScheme):
         s.F = s.F + s.dt * L @ s.F
         s.P, s.history = self.materials.stress_update(s.F, self.particles.material, s.history)
 
+    @stage
     def grid_forces(self, s):
         """f_int,i = -sum_p sigma_p grad S_ip V_p (sigma V = P F^T V0), plus sum_p S_ip f_p of the
         body forces and the boundary tractions (at mid-step) carried by the particles."""
@@ -250,6 +255,7 @@ class MPM(GodunovScheme):
         s.external = s.shape.S.T @ carried
         s.force += s.external
 
+    @stage
     def grid_update(self, s):
         """a_i = f_i / m_i, v_i* = v_i + dt a_i with the imposed components, and the work of the
         external forces and constraint reactions at the mid-step grid velocity."""
@@ -262,11 +268,13 @@ class MPM(GodunovScheme):
         reaction = np.where(self.constrained & s.filled[:, None], s.mass[:, None] * s.a - force, 0.0)
         s.work = s.dt * float(np.sum((factor * s.external + reaction) * 0.5 * (v_old + s.v_grid)))
 
+    @stage
     def particle_update(self, s):
         """v_p += dt sum_i S_ip a_i (FLIP), x_p += dt sum_i S_ip v_i*."""
         s.v = s.v + s.dt * (s.shape.S @ s.a)
         s.x = s.x + s.dt * (s.shape.S @ s.v_grid)
 
+    @stage
     def reproject(self, s):
         """UVF: the updated particle velocities projected again (same S and m_i)."""
         m = self.particles.mass
@@ -278,6 +286,7 @@ class MPM(GodunovScheme):
         return np.where(s.filled[:, None], nodal / np.where(s.filled, s.mass, 1.0)[:, None], 0.0)
 
     # ---------------------------------------------------------------- driver-facing
+    @stage
     def time_step(self, state, dt_max=np.inf):
         """dt = cfl h_min / max_p(c_p + |v_p|): waves and particles cross at most cfl cells; or
         WG08's fixed dt = cfl h_min / sqrt(E / rho0)."""
@@ -286,6 +295,11 @@ class MPM(GodunovScheme):
             return min(self.cfl * self.h_min / c, dt_max)
         _, v = system.split(state.Q, self.d)
         return min(self.cfl * self.h_min / np.max(state.speed + np.linalg.norm(v, axis=1)), dt_max)
+
+    @property
+    def stages(self):
+        """The variant's stages in their order, after the time step and before the check."""
+        return ("time_step",) + tuple(dict.fromkeys(self.variant.stages)) + ("check",)
 
     def step(self, state, dt_max=np.inf):
         F, p = system.split(state.U, self.d)

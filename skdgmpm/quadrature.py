@@ -13,8 +13,7 @@ from skfem import CellBasis
 
 from skdgmpm import forms
 
-from .kernel_cache import kernel_factory
-from .system import scratch
+from .kernel_cache import kernel_factory, scratch
 
 
 def cell_slots(cell, n_cells):

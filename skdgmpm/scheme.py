@@ -6,6 +6,8 @@ its time integration; the surface term -int Phi F_N* with the Riemann solver and
 conditions is the same for first-order DGMPM (one point per face) and DGFEM (facet Gauss
 points).
 """
+import functools
+import time as _time
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,7 +18,7 @@ from .bcs import FREE
 from .errors import InputError, InstabilityError
 from .faces import boundary_faces
 from .health import assess
-from .riemann import godunov_fluxes, impedance
+from .riemann import godunov_fluxes, impedance, normal_flux
 
 
 @dataclass
@@ -86,6 +88,35 @@ def cell_values(name, cells, values, n_cells):
     return out
 
 
+def stage(method):
+    """A named stage of a step (the scheme's ``stages`` lists them in the order they run): each
+    call's wall time, less that of the stages it calls, is added to the scheme's clock
+    (`GodunovScheme.stage_times`), so that the stages' times add up to the step's. ``@stage`` takes
+    the method's name, ``@stage("name")`` another."""
+    if isinstance(method, str):
+        return lambda m: _timed(m, method)
+    return _timed(method, method.__name__)
+
+
+def _timed(method, name):
+    @functools.wraps(method)
+    def timed(self, *args, **kwargs):
+        clock = self.__dict__.setdefault("_stage_clock", {"seconds": {}, "calls": {}, "inner": [0.0]})
+        clock["inner"].append(0.0)
+        t0 = _time.perf_counter()
+        try:
+            return method(self, *args, **kwargs)
+        finally:
+            spent = _time.perf_counter() - t0
+            inner = clock["inner"].pop()
+            clock["inner"][-1] += spent
+            clock["seconds"][name] = clock["seconds"].get(name, 0.0) + spent - inner
+            clock["calls"][name] = clock["calls"].get(name, 0) + 1
+
+    timed.stage = name
+    return timed
+
+
 class GodunovScheme:
     """Base of the steppers: needs ``d``, ``materials``, ``bcs``, ``cell_material``,
     ``particles`` (the points carrying the state), ``interior``, ``n_dofs``, ``cfl`` and
@@ -94,7 +125,19 @@ class GodunovScheme:
     face_options = {}
     external_work = 0.0
     body_force = None            # b(X, t) -> (n, d) in m/s^2 (a manufactured solution's); None: no source
+    stages = ()                  # the `stage` methods of a step, in the order they run
 
+    def stage_times(self, reset=False):
+        """{stage: (seconds, calls)} since the start (or the last reset), in the order of
+        ``stages``: each stage's own time, without the stages it calls."""
+        clock = self.__dict__.get("_stage_clock", {"seconds": {}, "calls": {}})
+        times = {name: (clock["seconds"][name], clock["calls"][name]) for name in self.stages
+                 if name in clock["seconds"]}
+        if reset:
+            self.__dict__.pop("_stage_clock", None)
+        return times
+
+    @stage
     def source(self, points, time):
         """Point values of the source [0, rho0 b(X, t)] of ``dU/dt + DIV F = S`` at ``points``
         (anything with ``X`` (n, d) and ``rho0`` (n,)): (n, d*d + d), zero in the F rows. Each
@@ -133,11 +176,13 @@ class GodunovScheme:
         Qf, Ff, rho = self.face_values(self.face_operator(faces, side), grid_state, cells)
         return Qf, self.materials.tangent(Ff, self.cell_material[cells]), rho
 
+    @stage
     def boundary_flux(self, grid_state, time):
         """(d) ghost states -> boundary stationary states and fluxes; returns states and power."""
         b = self.boundary
         return self.boundary_states(*self._side(b, "L", grid_state, b.cell_L), time)
 
+    @stage
     def boundary_states(self, Q_L, C, rho, time):
         """Boundary stationary states and fluxes from the inner traces Q_L (nf, ncomp), tangents C
         and densities on the boundary faces; returns states and power."""
@@ -148,11 +193,12 @@ class GodunovScheme:
         t_s, v_s = t_L.copy(), v_L.copy()
         for sel, bc in self.bc_groups:
             t_s[sel], v_s[sel] = bc.star(time, t_L[sel], v_L[sel], Z[sel], b.normal[sel])
-        flux = system.normal_flux(t_s, v_s, b.normal)
-        fs = FaceStates(flux, flux - system.normal_flux(t_L, v_L, b.normal), C, rho)
+        flux = normal_flux(t_s, v_s, b.normal)
+        fs = FaceStates(flux, flux - normal_flux(t_L, v_L, b.normal), C, rho)
         power = float(np.sum(b.measure * np.einsum("fi,fi->f", t_s, v_s)))
         return fs, power
 
+    @stage
     def interface_flux(self, grid_state):
         """(e) Godunov fluxes at interior faces from the linearised Riemann solver."""
         f = self.interior
@@ -181,12 +227,14 @@ class GodunovScheme:
             power = float(np.sum(self.boundary.measure * np.einsum("fi,fi->f", -p, v)))
         return R, power
 
+    @stage
     def time_step(self, state, dt_max=np.inf):
         """Delta t = CFL h_min / (k c_max) from the current fastest wave [R18 §5(b), L23 eq 67]."""
         return min(self.cfl * self.h_min / (self.speed_factor * state.speed.max()), dt_max)
 
     speed_factor = 1.0
 
+    @stage
     def constitutive_update(self, state, U, dt):
         """(h) P_p = P(F_p, history_p), v_p = p_p / rho0_p [R18 eq 41-42], the internal variables
         updated at the points from those of t_n (committed with the returned state); positions
@@ -223,6 +271,7 @@ class GodunovScheme:
         self.external_work += work
         return new
 
+    @stage
     def check(self, state):
         """Stop on non-finite values, J <= 0 or lost hyperbolicity, naming the step, time, point,
         cell, quantity and value (`skdgmpm.health`); sets the wave speeds of ``state`` used by the

@@ -1,45 +1,12 @@
-"""The conservation laws of hyperelastodynamics in total Lagrangian form [R18 eq 5-6].
-
-    dU/dt + d F_alpha / dX_alpha = rho0 b,   U = [F, p],   Q = [P, v],
-    F_alpha(Q) = -[v (x) E_alpha ; P E_alpha]
-
-The flux is linear in Q. State rows are laid out ``[F (row-major d x d), p or v (d)]`` (see
+"""State arrays of hyperelastodynamics in total Lagrangian form [R18 eq 5-6] and the batched
+passes over them (the volume flux, the embedding of F), on the point physics of
+`skdgmpm.equations`. State rows are laid out ``[F (row-major d x d), p or v (d)]`` (see
 docs/CONVENTIONS.md); ``d`` is the scene dimension.
 """
-import llvmlite.ir as ir
 import numpy as np
-from numba import njit, types
-from numba.core import cgutils
-from numba.extending import intrinsic
-from numba.np.numpy_support import carray
 
-from .kernel_cache import kernel_factory
-
-SCRATCH_SIZE = 81       # entries of a `scratch` array: a (3, 3, 3, 3) tangent
-
-
-@intrinsic
-def _stack_doubles(typingctx):
-    """Pointer to SCRATCH_SIZE doubles on the stack of the compiled function being built."""
-    def codegen(context, builder, signature, args):
-        return cgutils.alloca_once(builder, context.get_value_type(types.float64),
-                                   size=ir.Constant(ir.IntType(64), SCRATCH_SIZE))
-    return types.CPointer(types.float64)(), codegen
-
-
-@njit(cache=True, inline="always")
-def scratch(shape):
-    """Uninitialised float array of ``shape`` (at most SCRATCH_SIZE entries) on the stack of the
-    compiled function that calls it, for the per-point scratch of the compiled loops: unlike
-    ``np.empty`` (heap memory the compiler must assume any other array may alias), its entries
-    stay in registers once the loops over it are unrolled (a literal d). It lives as long as that
-    function's call: never return it or keep it in another object."""
-    n = 1
-    for s in shape:
-        n *= s
-    if n > SCRATCH_SIZE:
-        raise ValueError("scratch: more than SCRATCH_SIZE entries")
-    return carray(_stack_doubles(), shape)
+from .equations import add_flux, embed as _embed_point
+from .kernel_cache import kernel_factory, scratch
 
 
 def n_components(d):
@@ -77,56 +44,47 @@ def primitive(P, p, rho):
 
 
 @kernel_factory
-def _embed(d):                          # a literal d: the loops unrolled
+def _embed(d):
     def embed(F, F3):
         for p in range(len(F)):
-            for i in range(3):
-                for j in range(3):
-                    F3[p, i, j] = F[p, i, j] if i < d and j < d else (1.0 if i == j else 0.0)
+            _embed_point(F[p], F3[p], d)
     return embed
 
 
 def embed(F):
-    """(n, d, d) -> (n, 3, 3): plane strain / uniaxial strain embedding, identity elsewhere (one
-    compiled pass; F may be a strided view of a state array)."""
-    F3 = np.empty((len(F), 3, 3))
-    _embed(F.shape[1])(F, F3)
+    """(n, d, d) -> (n, 3, 3): plane strain / uniaxial strain embedding, identity elsewhere
+    (`equations.embed`; F may be a strided view of a state array)."""
+    n, d = len(F), F.shape[1]
+    F3 = np.empty((n, 3, 3))
+    _embed(d)(np.reshape(F, (n, d * d)), F3)
     return F3
-
-
-def normal_flux(traction, velocity, N):
-    """F_N = -[v (x) N ; t] for traction t = P N and velocity v, all (n, d): returns (n, d*d + d)."""
-    return -join(velocity[:, :, None] * N[:, None, :], traction)
 
 
 @kernel_factory
 def _volume_flux(d):                    # a literal d: the loops unrolled
     def volume_flux(Q, indptr, indices, data, add, R):
         """R += sum_alpha K^alpha F_alpha(Q) for the CSR matrices K^alpha on one pattern (data:
-        their data arrays stacked (d, nnz)): F-rows (i, alpha) get -K^alpha v_i, p-rows
-        -K^alpha P_i,alpha, each row's products summed in CSR order as scipy's product does and
-        subtracted in the order of alpha; R = ... (each row zeroed as it is reached) unless
-        ``add``."""
-        dd = d * d
-        sv, sP = scratch((d, d)), scratch((d, d))
+        their data arrays stacked (d, nnz)): F_alpha (`equations.add_flux`) applied to each row's
+        weighted sums of Q (the flux is linear), summed in CSR order as scipy's product does and
+        added in the order of alpha; R = ... (each row zeroed as it is reached) unless ``add``."""
+        nc = d * d + d
+        s, o = scratch((d, nc)), scratch((nc,))
         for r in range(len(indptr) - 1):
             for a in range(d):
-                for i in range(d):
-                    sv[a, i], sP[a, i] = 0.0, 0.0
+                for c in range(nc):
+                    s[a, c] = 0.0
             for k in range(indptr[r], indptr[r + 1]):    # the row read once for all the matrices
                 n = indices[k]
                 for a in range(d):
                     w = data[a, k]
-                    for i in range(d):
-                        sv[a, i] += w * Q[n, dd + i]
-                        sP[a, i] += w * Q[n, i * d + a]
-            for i in range(d):                           # each entry written once (0 - x is -x exactly)
-                for a in range(d):
-                    R[r, i * d + a] = (R[r, i * d + a] if add else 0.0) - sv[a, i]
-                acc = R[r, dd + i] if add else 0.0
-                for a in range(d):
-                    acc -= sP[a, i]
-                R[r, dd + i] = acc
+                    for c in range(nc):
+                        s[a, c] += w * Q[n, c]
+            for c in range(nc):
+                o[c] = R[r, c] if add else 0.0
+            for a in range(d):
+                add_flux(s[a], a, 1.0, o, d)
+            for c in range(nc):                          # each entry written once
+                R[r, c] = o[c]
     return volume_flux
 
 

@@ -5,13 +5,54 @@ is an independent computation from the full quasi-linear Jacobian [L23 eq 11-12]
 """
 import numpy as np
 import pytest
+from scipy.linalg import null_space
 
 from skdgmpm.constitutive import MaterialSet
 from skdgmpm.materials import make_material
-from skdgmpm.riemann import godunov_state, godunov_state_eigen, impedance, transverse_positive
+from skdgmpm.riemann import godunov_state, impedance, transverse_positive
 
 STEEL = dict(E=2e11, nu=0.3, rho=7800.0)
 ALU = dict(E=7e10, nu=0.33, rho=2700.0)
+
+
+def godunov_state_eigen(P_L, v_L, P_R, v_R, C_L, C_R, rho_L, rho_R, N):
+    """Reference path: Q* = Q_L + sum over left-going waves, from a full eigen-decomposition.
+
+    Builds the quasi-linear Jacobian A_N(Q) of [L23 eq 11-12] on each side, takes the left-going
+    eigenvectors of side L, the right-going of side R and the (material-independent) stationary
+    ones, and solves Q_R - Q_L = sum_m delta_m r_m [R18 eq 32-33]. Slow; independent of `skdgmpm.equations`.
+    Returns the full Q* = (P* (nf, d, d), v* (nf, d)).
+    """
+    nf, d = v_L.shape
+    nq = d * d + d
+
+    def jacobian(C, rho):
+        A = np.zeros((nf, nq, nq))
+        A[:, : d * d, d * d:] = -np.einsum("fiajb,fb->fiaj", C, N).reshape(nf, d * d, d)
+        A[:, d * d:, : d * d] = -(np.eye(d)[None, :, :, None] * N[:, None, None, :]
+                                  ).reshape(nf, d, d * d) / rho[:, None, None]
+        return A
+
+    J_L, J_R = jacobian(C_L, rho_L), jacobian(C_R, rho_R)
+    lam_L, R_L = np.linalg.eig(J_L)
+    lam_R, R_R = np.linalg.eig(J_R)
+    scale = np.abs(np.concatenate([lam_L, lam_R], axis=1)).max(axis=1, keepdims=True)
+    left = lam_L.real < -1e-8 * scale          # wave speeds are real (hyperbolicity)
+    right = lam_R.real > 1e-8 * scale
+    Q_L = np.concatenate([P_L.reshape(nf, -1), v_L], axis=1)
+    Q_R = np.concatenate([P_R.reshape(nf, -1), v_R], axis=1)
+    out = np.empty_like(Q_L)
+    for f in range(nf):                       # reference path only: clarity over speed
+        # stationary waves: v = 0, P N = 0, i.e. P = e_i (x) m with m . N = 0 (built
+        # explicitly: eig may return this kernel as a complex pair)
+        tangents = null_space(N[f][None, :])                            # (d, d - 1)
+        kernel = np.zeros((nq, d * (d - 1)))
+        kernel[: d * d] = np.einsum("ij,am->iajm", np.eye(d), tangents).reshape(d * d, -1)
+        basis = np.concatenate([R_L[f][:, left[f]].real, kernel, R_R[f][:, right[f]].real], axis=1)
+        delta = np.linalg.solve(basis, Q_R[f] - Q_L[f])
+        n_left = left[f].sum()
+        out[f] = Q_L[f] + basis[:, :n_left] @ delta[:n_left]
+    return out[:, : d * d].reshape(nf, d, d), out[:, d * d:]
 
 
 def random_faces(rng, nf, d, law_L="neo_hookean", law_R="neo_hookean", right=ALU, amp=0.1):
