@@ -15,6 +15,7 @@ from skdgmpm.materials.points import law_tangent
 from .equations import add_normal_flux, riemann
 from .faces import gather_row as _gather
 from .kernel_cache import kernel_factory, scratch
+from .system import DIMENSION
 
 
 def interior_flux_sum(T_L, T_R, u_hat, q_hat, rho_L, rho_R, N, mat_L, mat_R, laws, params, weights, flux):
@@ -52,7 +53,7 @@ def traces(T, u_hat, q_hat, F, Q):
     """F[s, r] = (T u_hat[s])_F (S, n_rows, d*d) and Q[s, r] = T q_hat[s] (S, n_rows, nc) for the
     rows r of a trace T at every time node s (the boundary faces, whose conditions are applied in
     Python per node)."""
-    d = {1: 1, 4: 2, 9: 3}[F.shape[2]]
+    d = DIMENSION[Q.shape[2]]
     _traces(d)(T, u_hat, q_hat, F, Q)
 
 

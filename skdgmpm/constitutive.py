@@ -9,7 +9,7 @@ from skdgmpm.materials.points import law_table, stress_update_point
 
 from .equations import embed as _embed_point
 from .kernel_cache import kernel_factory, scratch
-from .system import embed
+from .system import DIMENSION, embed
 
 
 @kernel_factory
@@ -82,7 +82,7 @@ class MaterialSet:
         if history is None:
             history = self.initial_history(np.asarray(index)) if self.n_history else np.empty((len(U), 0))
         Q, h = np.empty(U.shape), np.empty_like(history)
-        d = {2: 1, 6: 2, 12: 3}[U.shape[1]]
+        d = DIMENSION[U.shape[1]]
         _states(d)(*self.laws, np.asarray(index, dtype=np.int64), U, np.asarray(rho, dtype=float), history, h, Q)
         return Q, h
 

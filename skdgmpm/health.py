@@ -15,6 +15,7 @@ from skdgmpm.materials.points import law_tangent
 
 from .equations import acoustic, embed
 from .kernel_cache import kernel_factory, scratch
+from .system import DIMENSION
 
 
 def directions(d):
@@ -128,7 +129,7 @@ def _assess(d):                         # a literal d: the (d, d) loops unrolled
 def assess(materials, points, U, Q):
     """`Health` of the state (U, Q) at ``points`` (with ``material``) for a `MaterialSet`."""
     n, nc = U.shape
-    d = int(round((-1 + np.sqrt(1 + 4 * nc)) / 2))                      # nc = d * d + d
+    d = DIMENSION[nc]
     laws, params = materials.laws                                        # built once per set
     rho = np.array([m.rho for m in materials.materials])
     finite, J, lowest, speed = np.empty(n, dtype=np.bool_), np.empty(n), np.empty(n), np.empty(n)

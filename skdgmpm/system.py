@@ -13,6 +13,9 @@ def n_components(d):
     return d * d + d
 
 
+DIMENSION = {n_components(d): d for d in (1, 2, 3)}     # the dimension of a state row's width
+
+
 def split(W, d):
     """View a state array (n, d*d + d) as a tensor part (n, d, d) and a vector part (n, d)."""
     return W[:, : d * d].reshape(-1, d, d), W[:, d * d:]
