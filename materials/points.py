@@ -1,7 +1,7 @@
 """Compiled point laws: one material's stress or tangent at one point, chosen by the law's ``law_id``.
 
 Kernels that loop over points or faces themselves (the DGMPM face and particle passes, the health
-check) evaluate the law inside their loop through `law_tangent`; a set of materials is handed
+check) evaluate the law inside their loop through `tangent_point` (1D: `tangent_call`); a set of materials is handed
 to them as a table (`law_table`): one row of (law id, parameters) per material.
 
 Every law inlined here is compiled into every fused pass that evaluates a law (the face passes,
@@ -48,19 +48,12 @@ def tangent_point(law, prm, F, C, d):
 
 @njit(cache=True)
 def tangent_call(law, prm, F, C, d):
-    """`tangent_point` as a function of its own, compiled once per d and called."""
+    """`tangent_point` as a function of its own, compiled once and called: the 1D loops call it
+    (every law compiled once, not inlined at each call site: their compile time halves), the 2D
+    ones inline `tangent_point` (the tangent stays in registers: the hot loops). The choice is made
+    at the top of each kernel (``if d == 1:``), where numba prunes the other branch before typing;
+    inside an inlined helper both branches would be compiled."""
     tangent_point(law, prm, F, C, d)
-
-
-@njit(cache=True, inline="always")
-def law_tangent(law, prm, F, C, d):
-    """`tangent_point` as the compiled loops over faces and points take it: called in 1D (the laws
-    compiled once, not inlined at every call site: the 1D passes' compile time halves), inlined
-    otherwise (the tangent stays in registers: the hot 2D loops)."""
-    if d == 1:
-        tangent_call(law, prm, F, C, d)
-    else:
-        tangent_point(law, prm, F, C, d)
 
 
 @njit(cache=True, inline="always")

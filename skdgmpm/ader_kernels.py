@@ -10,7 +10,7 @@ fluxes (nf, nc) are stored: the surface integral is linear in F_N*, so it is tak
 A trace is the triple (indptr, indices, data) of its CSR matrix (n_rows, n_points); the predictor
 u_hat, q_hat is (S, n_points, nc) at S time nodes.
 """
-from skdgmpm.materials.points import law_tangent
+from skdgmpm.materials.points import tangent_call, tangent_point
 
 from .equations import add_normal_flux, riemann
 from .faces import gather_row as _gather
@@ -40,8 +40,12 @@ def _interior_flux_sum(d):              # a literal d: the (d, d) loops unrolled
             for s in range(len(weights)):
                 _gather(T_L, f, u_hat[s], q_hat[s], q_L, F_L, d)
                 _gather(T_R, f, u_hat[s], q_hat[s], q_R, F_R, d)
-                law_tangent(laws[mat_L[f]], params[mat_L[f]], F_L, C_L, d)
-                law_tangent(laws[mat_R[f]], params[mat_R[f]], F_R, C_R, d)
+                if d == 1:              # the law called, not inlined (`points.tangent_call`)
+                    tangent_call(laws[mat_L[f]], params[mat_L[f]], F_L, C_L, d)
+                    tangent_call(laws[mat_R[f]], params[mat_R[f]], F_R, C_R, d)
+                else:
+                    tangent_point(laws[mat_L[f]], params[mat_L[f]], F_L, C_L, d)
+                    tangent_point(laws[mat_R[f]], params[mat_R[f]], F_R, C_R, d)
                 if not riemann(q_L, C_L, rho_L[f], q_R, C_R, rho_R[f], N[f], t_L, t_R, t_s, v_s, d):
                     return f
                 add_normal_flux(t_s, v_s, N[f], weights[s], flux[f], d)

@@ -17,7 +17,7 @@ by `DGMPM._setup_transverse` (empty arrays for DCU).
 """
 from numba import njit
 
-from skdgmpm.materials.points import law_tangent
+from skdgmpm.materials.points import tangent_call, tangent_point
 
 from .equations import add_normal_flux, ctu_split, fluctuations, impedance, riemann, traction
 from .faces import gather_row
@@ -111,8 +111,12 @@ def _interior_pass(d):                  # a literal d: the (d, d) loops unrolled
             rho_L = _gather(T_L, f, U, Q, rho, q_L, F_L, d)
             rho_R = _gather(T_R, f, U, Q, rho, q_R, F_R, d)
             m_L, m_R = cell_material[cell_L[f]], cell_material[cell_R[f]]
-            law_tangent(laws[m_L], params[m_L], F_L, C_L, d)
-            law_tangent(laws[m_R], params[m_R], F_R, C_R, d)
+            if d == 1:                  # the law called, not inlined (`points.tangent_call`)
+                tangent_call(laws[m_L], params[m_L], F_L, C_L, d)
+                tangent_call(laws[m_R], params[m_R], F_R, C_R, d)
+            else:
+                tangent_point(laws[m_L], params[m_L], F_L, C_L, d)
+                tangent_point(laws[m_R], params[m_R], F_R, C_R, d)
             if not riemann(q_L, C_L, rho_L, q_R, C_R, rho_R, N[f], t_L, t_R, t_s, v_s, d):
                 return f
             for k in range(nc):
@@ -144,7 +148,10 @@ def _boundary_sides(d):
         for f in range(len(N)):
             rho_f[f] = _gather(T, f, U, Q, rho, q, F, d)
             m = cell_material[cell[f]]
-            law_tangent(laws[m], params[m], F, C[f], d)
+            if d == 1:
+                tangent_call(laws[m], params[m], F, C[f], d)
+            else:
+                tangent_point(laws[m], params[m], F, C[f], d)
             traction(q, N[f], t_L[f], d)
             for i in range(d):
                 v_L[f, i] = q[dd + i]

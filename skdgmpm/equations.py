@@ -115,6 +115,14 @@ def sqrt_spd(M, Z, Zi, d):
         ok, Z[0, 0], Z[0, 1], Z[1, 0], Z[1, 1], Zi[0, 0], Zi[0, 1], Zi[1, 0], Zi[1, 1] = _sqrt_spd2(
             M[0, 0], M[0, 1], M[1, 0], M[1, 1])
         return ok
+    return _sqrt_spd_eig(M, Z, Zi, d)
+
+
+@njit(cache=True)
+def _sqrt_spd_eig(M, Z, Zi, d):
+    """`sqrt_spd` by eigen-decomposition (d = 3): a function of its own, compiled once and called.
+    (numba prunes an ``if d == ...`` branch only at the top of a kernel, not inside an inlined
+    helper: inlined, this branch would be compiled into every 1D and 2D kernel.)"""
     omega, Y = np.linalg.eigh(M)
     if not np.all(omega > 0):
         return False
@@ -145,6 +153,13 @@ def _solve(A, b, x, d):
         r = 1.0 / (A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0])
         x[0], x[1] = (A[1, 1] * b[0] - A[0, 1] * b[1]) * r, (A[0, 0] * b[1] - A[1, 0] * b[0]) * r
         return
+    _eliminate(A, b, x, d)
+
+
+@njit(cache=True)
+def _eliminate(A, b, x, d):
+    """`_solve` by Gaussian elimination with partial pivoting (d = 3), compiled once and called
+    (see `_sqrt_spd_eig`)."""
     for k in range(d):
         p = k
         for r in range(k + 1, d):

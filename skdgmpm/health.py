@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from skdgmpm.materials.points import law_tangent
+from skdgmpm.materials.points import tangent_call, tangent_point
 
 from .equations import acoustic, embed
 from .kernel_cache import kernel_factory, scratch
@@ -104,7 +104,10 @@ def _assess(d):                         # a literal d: the (d, d) loops unrolled
                         + F[0, 1] * (F[1, 2] * F[2, 0] - F[1, 0] * F[2, 2])
                         + F[0, 2] * (F[1, 0] * F[2, 1] - F[1, 1] * F[2, 0]))
             m = material[p]
-            law_tangent(laws[m], params[m], F, C, d)
+            if d == 1:
+                tangent_call(laws[m], params[m], F, C, d)
+            else:
+                tangent_point(laws[m], params[m], F, C, d)
             lo, hi = np.inf, -np.inf
             for k in range(len(N)):
                 acoustic(C, N[k], 1.0, A, d)
