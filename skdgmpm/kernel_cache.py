@@ -215,11 +215,11 @@ def scratch(shape):
 
 # ---------------------------------------------------------------- the first run's notice
 # CPU seconds to compile a scene's kernels from a cold cache, per method and dimension, on the
-# reference 2-core machine (dgmpm 1D: bar_elastic_1d, 73 s; ader-dgmpm 2D: P = 3, 69 s; the others
+# reference 2-core machine (dgmpm 1D: bar_elastic_1d, 30 s; ader-dgmpm 2D: P = 3, 37 s; the others
 # estimated alike); the notice says the last one measured on this machine instead
 # (<base>/compile_seconds.json) where there is one.
-EXPECTED_S = {"dgmpm": {1: 75, 2: 80}, "mpm": {1: 50, 2: 60}, "rk-dgfem": {1: 70, 2: 70},
-              "ader-dgfem": {1: 75, 2: 70}, "ader-dgmpm": {1: 75, 2: 70}}
+EXPECTED_S = {"dgmpm": {1: 30, 2: 45}, "mpm": {1: 30, 2: 40}, "rk-dgfem": {1: 35, 2: 40},
+              "ader-dgfem": {1: 35, 2: 40}, "ader-dgmpm": {1: 35, 2: 40}}
 
 
 def _measured_path():
