@@ -8,6 +8,7 @@ from numba import njit
 from skdgmpm.materials.points import law_table, stress_update_point
 
 from .equations import embed as _embed_point
+from . import parallel
 from .kernel_cache import kernel_factory, scratch
 from .system import DIMENSION, embed
 
@@ -83,7 +84,10 @@ class MaterialSet:
             history = self.initial_history(np.asarray(index)) if self.n_history else np.empty((len(U), 0))
         Q, h = np.empty(U.shape), np.empty_like(history)
         d = DIMENSION[U.shape[1]]
-        _states(d)(*self.laws, np.asarray(index, dtype=np.int64), U, np.asarray(rho, dtype=float), history, h, Q)
+        (laws, params), kernel = self.laws, _states(d)
+        index, rho = np.asarray(index, dtype=np.int64), np.asarray(rho, dtype=float)
+        parallel.rows(len(U), lambda lo, hi: kernel(laws, params, index[lo:hi], U[lo:hi], rho[lo:hi], history[lo:hi],
+                                                    h[lo:hi], Q[lo:hi]))
         return Q, h
 
     def state(self, U, index, rho, history=None):

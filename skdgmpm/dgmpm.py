@@ -28,7 +28,9 @@ import scipy.sparse as sp
 from skdgmpm.materials.points import law_table
 
 from . import system
-from .dgmpm_kernels import boundary_pass, boundary_sides, euler_update, integrate_faces, interior_pass
+from . import parallel
+from .dgmpm_kernels import (boundary_edge_corrections, boundary_pass, boundary_sides, edge_corrections, euler_update,
+                            integrate_faces, interior_pass)
 from .errors import InputError
 from .faces import interior_faces
 from .integrators import INTEGRATORS
@@ -109,6 +111,7 @@ class DGMPM(GodunovScheme):
                  np.zeros((2, 0)))
         self.ctu = None
         self.topology = {"L": empty, "R": empty, "boundary": empty}
+        self.split_topology = {"L": (empty[0], np.zeros((0, 2, 2))), "R": (empty[0], np.zeros((0, 2, 2)))}
         if self.transverse != "ctu" or self.d != 2:
             return
         m = self.grid.submesh
@@ -127,6 +130,12 @@ class DGMPM(GodunovScheme):
                          self.boundary.normal[j_bnd])
             h = self.cell_volume[cells] / faces.measure
             self.topology[side] = tuple(np.ascontiguousarray(a) for a in (h, n, j_int, j_bnd, sign))
+        # the face pass writes each side's parts face by face (face-major normals), the edges
+        # gather them (`edge_corrections`): no scatter, the same for any thread count
+        for side in ("L", "R"):
+            h, n = self.topology[side][:2]
+            self.split_topology[side] = (h, np.ascontiguousarray(n.transpose(1, 0, 2)))
+        self.to_interior, self.to_boundary = self._edge_gathers()
         frame = np.zeros((len(self.boundary), 2, 2))
         free_v = np.zeros((len(self.boundary), 2), bool)
         free_t = np.zeros((len(self.boundary), 2), bool)
@@ -155,12 +164,26 @@ class DGMPM(GodunovScheme):
         fluxes (nf, nc) and the corrections per unit Delta t of the interior and boundary faces'
         fluxes, (nf, nc) and (nb, nc)."""
         f, nc = self.interior, grid_state.U.shape[1]
+        ctu = self.ctu is not None
         flux, corr, corr_bnd = np.empty((len(f), nc)), np.zeros((len(f), nc)), np.zeros((len(self.boundary), nc))
-        bad = interior_pass(self.traces["L"], self.traces["R"], grid_state.U, grid_state.Q, self.map.rho,
-                            f.normal, f.cell_L, f.cell_R, self.cell_material, *self.laws,
-                            self.ctu is not None, self.topology["L"], self.topology["R"], flux, corr, corr_bnd)
+        G = np.empty((len(f) if ctu else 0, 4, nc))
+        T_L, T_R, rho, laws = self.traces["L"], self.traces["R"], self.map.rho, self.laws
+        (h_L, n_L), (h_R, n_R) = self.split_topology["L"], self.split_topology["R"]
+        csr = parallel.csr_rows
+
+        def faces(lo, hi):
+            sl = slice(lo, hi) if ctu else slice(0, 0)
+            return interior_pass(csr(T_L, lo, hi), csr(T_R, lo, hi), grid_state.U, grid_state.Q, rho,
+                                 f.normal[lo:hi], f.cell_L[lo:hi], f.cell_R[lo:hi], self.cell_material, *laws,
+                                 ctu, (h_L[sl], n_L[sl]), (h_R[sl], n_R[sl]), flux[lo:hi], G[sl])
+        bad = parallel.first_bad(len(f), faces)
         if bad >= 0:
             _not_hyperbolic(bad)
+        if ctu:
+            parts = G.reshape(-1, nc)
+            parallel.rows(len(f), lambda lo, hi: edge_corrections(parallel.csr_rows(self.to_interior, lo, hi),
+                                                                  parts, corr[lo:hi]))
+            boundary_edge_corrections(self.to_boundary, parts, corr_bnd)
         return flux, corr, corr_bnd
 
     @stage
@@ -198,6 +221,33 @@ class DGMPM(GodunovScheme):
         them with the fluxes.) The filter is linear: its matrix per face is built once
         (``_boundary_filter``)."""
         return np.einsum("fkj,fj->fk", self.ctu, corr_bnd)
+
+    def _edge_gathers(self):
+        """CSR rows, one per interior edge, of the parts (rows of `interior_pass`'s G flattened,
+        4 f + 2 side + e) that it receives and their signs; and per boundary edge, the parts and
+        the opposite edge's parts (`edge_corrections`). Within a row the parts are in the order a
+        loop over the faces meets them."""
+        nf = len(self.interior)
+        part = 4 * np.arange(nf)[None, :] + np.arange(2)[:, None]            # (2 edges, nf)
+        rows = {"interior": ([], [], []), "boundary": ([], [], [])}
+        for s, side in enumerate(("L", "R")):
+            _, _, j_int, j_bnd, sign = self.topology[side]
+            for e in range(2):
+                k = j_int[e] >= 0
+                rows["interior"][0].append(j_int[e][k])
+                rows["interior"][1].append(part[e][k] + 2 * s)
+                rows["interior"][2].append(sign[e][k])
+                k = j_bnd[e] >= 0
+                rows["boundary"][0].append(j_bnd[e][k])
+                rows["boundary"][1].append(part[e][k] + 2 * s)
+                rows["boundary"][2].append(part[1 - e][k] + 2 * s)
+        out = []
+        for name, n in (("interior", nf), ("boundary", len(self.boundary))):
+            j, parts, third = (np.concatenate(a) for a in rows[name])
+            order = np.lexsort((parts, j))
+            indptr = np.concatenate([[0], np.cumsum(np.bincount(j, minlength=n))]).astype(np.int64)
+            out.append((indptr, parts[order].astype(np.int64), third[order]))
+        return out
 
     def _boundary_filter(self, frame, free_v, free_t):
         """The matrix (nb, nc, nc) of `transverse_flux` (linear in the corrections): the components
@@ -253,7 +303,9 @@ class DGMPM(GodunovScheme):
         volume, flux, corr, corr_bnd = self.fixed_terms(grid_state)
         weight = (step, self.inv_M)              # step M^-1, node by node
         out = np.empty_like(base)
-        euler_update(self.gather_interior, flux, corr, dt, volume, base, weight, out)
+        parallel.rows(len(base), lambda lo, hi: euler_update(
+            parallel.csr_rows(self.gather_interior, lo, hi), flux, corr, dt, volume[lo:hi], base[lo:hi],
+            (step, self.inv_M[lo:hi]), out[lo:hi]))
         power = self.add_boundary_terms(grid_state, time, dt, corr_bnd, weight, out)
         return out, power
 

@@ -4,16 +4,19 @@ For every face the pass gathers the side states through the trace operators (CSR
 in scipy's order), evaluates each side's tangent with the law's point function
 (`skdgmpm.materials.points`), solves the linearised Riemann problem (`skdgmpm.equations`)
 and, for CTU, splits each fluctuation on the characteristic basis of the two edges of
-the cell it enters as soon as it is known, adding those corrections to the edges' fluxes. The
-corrections are proportional to Delta t (G = -dt / (2 h) B+ A dU): the interior pass stores them
-per unit Delta t, so that a repeated attempt of the CFL guard reuses the whole pass; the boundary
-pass (its stationary states depend on time) is redone, and `euler_update` adds
--int Phi (F* + dt G) to the residual as it advances the nodes.
+the cell it enters as soon as it is known, writing the two parts beside the face's flux; each
+edge then gathers the parts it receives (`edge_corrections`), in face order. Every pass writes
+its own rows only, so that it runs in chunks on several threads with the same bits
+(`skdgmpm.parallel`). The corrections are proportional to Delta t (G = -dt / (2 h) B+ A dU): the
+interior pass stores them per unit Delta t, so that a repeated attempt of the CFL guard reuses
+the whole pass; the boundary pass (its stationary states depend on time) is redone, and
+`euler_update` adds -int Phi (F* + dt G) to the residual as it advances the nodes.
 
 Face-set arrays as in `skdgmpm.faces` ((nf, d) normals, (nf,) measures); a trace is the triple
 (indptr, indices, data) of its CSR matrix; a CTU topology of one face side is
 (h (nf,), normals (2, nf, 2), interior edge (2, nf), boundary edge (2, nf), sign (2, nf)) as built
-by `DGMPM._setup_transverse` (empty arrays for DCU).
+by `DGMPM._setup_transverse` (empty arrays for DCU); the interior pass takes (h, normals (nf, 2, 2))
+of each side, face-major so that a chunk of faces is a contiguous slice.
 """
 from numba import njit
 
@@ -65,43 +68,34 @@ def _add_boundary_edges(edge_bnd, f, G_0, G_1, corr_bnd):
 
 
 @njit(cache=True, inline="always")
-def _split_interior(w, C, rho, topo, f, corr, corr_bnd):
-    """`equations.ctu_split` per unit Delta t (scale -1 / (2 h)): an interior edge j gets sign G_e added to
-    corr[j], a boundary edge as `_add_boundary_edges`."""
-    h, normals, edge_int, edge_bnd, sign = topo
-    ok, G_0, G_1 = ctu_split(w, C, rho, -1.0 / (2.0 * h[f]), normals[0, f, 0], normals[0, f, 1],
-                             normals[1, f, 0], normals[1, f, 1])
-    if not ok:
-        return False
-    j = edge_int[0, f]
-    if j >= 0:
-        s = sign[0, f]
-        for k in range(6):
-            corr[j, k] += s * G_0[k]
-    j = edge_int[1, f]
-    if j >= 0:
-        s = sign[1, f]
-        for k in range(6):
-            corr[j, k] += s * G_1[k]
-    _add_boundary_edges(edge_bnd, f, G_0, G_1, corr_bnd)
-    return True
+def _split_into(w, C, rho, topo, f, G, k):
+    """`equations.ctu_split` per unit Delta t (scale -1 / (2 h)) of a fluctuation entering one
+    side of face f: its parts for the cell's two edges into G[f, k] and G[f, k + 1]."""
+    h, normals = topo
+    ok, G_0, G_1 = ctu_split(w, C, rho, -1.0 / (2.0 * h[f]), normals[f, 0, 0], normals[f, 0, 1],
+                             normals[f, 1, 0], normals[f, 1, 1])
+    for c in range(6):
+        G[f, k, c] = G_0[c]
+        G[f, k + 1, c] = G_1[c]
+    return ok
 
 
 # ---------------------------------------------------------------- interior faces
-def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
-                  ctu, topo_L, topo_R, flux, corr, corr_bnd):
+def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params, ctu, topo_L, topo_R,
+                  flux, G):
     """Godunov flux of every interior face into flux (nf, nc) and, for ``ctu`` (2D), the
-    transverse corrections per unit Delta t of both sides' fluctuations added to corr (nf, nc)
-    and corr_bnd (nb, nc) (zero on entry). Returns the first face whose acoustic tensor is not
-    positive definite, or -1."""
+    transverse parts per unit Delta t of both sides' fluctuations into G (nf, 4, nc): side L's
+    for its cell's two edges in G[:, 0:2], side R's in G[:, 2:4] (summed on the edges by
+    `edge_corrections`: each face writes its own rows only). Returns the first face whose
+    acoustic tensor is not positive definite, or -1."""
     return _interior_pass(N.shape[1])(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
-                                      ctu, topo_L, topo_R, flux, corr, corr_bnd)
+                                      ctu, topo_L, topo_R, flux, G)
 
 
 @kernel_factory
 def _interior_pass(d):                  # a literal d: the (d, d) loops unrolled
     def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
-                      ctu, topo_L, topo_R, flux, corr, corr_bnd):
+                      ctu, topo_L, topo_R, flux, G):
         nc = d * d + d
         q_L, q_R, w_L, w_R = scratch((nc,)), scratch((nc,)), scratch((nc,)), scratch((nc,))
         F_L, F_R = scratch((3, 3)), scratch((3, 3))
@@ -124,12 +118,49 @@ def _interior_pass(d):                  # a literal d: the (d, d) loops unrolled
             add_normal_flux(t_s, v_s, N[f], 1.0, flux[f], d)
             if d == 2 and ctu:              # fluctuations A- dQ into L, A+ dQ into R, split at once
                 fluctuations(q_L, q_R, N[f], t_L, t_R, flux[f], w_L, w_R, d)
-                if not _split_interior(w_L, C_L, rho_L, topo_L, f, corr, corr_bnd):
+                if not _split_into(w_L, C_L, rho_L, topo_L, f, G, 0):
                     return f
-                if not _split_interior(w_R, C_R, rho_R, topo_R, f, corr, corr_bnd):
+                if not _split_into(w_R, C_R, rho_R, topo_R, f, G, 2):
                     return f
         return -1
     return interior_pass
+
+
+def edge_corrections(to_interior, G, corr):
+    """The transverse corrections each interior edge receives, gathered edge by edge from the
+    parts G (n_parts, nc) (`interior_pass`'s (nf, 4, nc) flattened): corr[j] = sum_k s_k G[part_k],
+    CSR rows ``to_interior`` (indptr, parts, signs s), terms in face order as a serial scatter
+    over the faces would add them."""
+    _edge_corrections(G.shape[1])(to_interior, G, corr)
+
+
+@kernel_factory
+def _edge_corrections(nc):              # a literal width: the loops unrolled
+    def edge_corrections(to_interior, G, corr):
+        indptr, parts, signs = to_interior
+        s = scratch((nc,))
+        for j in range(len(indptr) - 1):
+            for c in range(nc):
+                s[c] = 0.0
+            for k in range(indptr[j], indptr[j + 1]):
+                p, sign = parts[k], signs[k]
+                for c in range(nc):
+                    s[c] += sign * G[p, c]
+            for c in range(nc):
+                corr[j, c] = s[c]
+    return edge_corrections
+
+
+@njit(cache=True, nogil=True)
+def boundary_edge_corrections(to_boundary, G, corr_bnd):
+    """corr_bnd[j] += sum_k (G[part_k] - G[other_k]) for each boundary edge j, CSR rows
+    ``to_boundary`` (indptr, parts, other parts): its ghost cell, a copy of the cell, sends back
+    the opposite edge's part."""
+    indptr, parts, other = to_boundary
+    for j in range(len(indptr) - 1):
+        for k in range(indptr[j], indptr[j + 1]):
+            for c in range(G.shape[1]):
+                corr_bnd[j, c] += G[parts[k], c] - G[other[k], c]
 
 
 # ---------------------------------------------------------------- boundary faces
@@ -228,7 +259,7 @@ def _euler_update(nc):                  # a literal width: the loops unrolled
     return euler_update
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def integrate_faces(T, measure, scale, flux, w, R):
     """R += w scale T^T (measure flux): the surface integral of face-constant fluxes (nf, nc), in
     face order, weighted per node by w = (step, inv_M) as in `_integrate`."""

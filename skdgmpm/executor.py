@@ -16,6 +16,7 @@ import os
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 
 from .errors import InputError
+from .parallel import set_threads
 
 
 class SerialExecutor(Executor):
@@ -63,7 +64,8 @@ def make_executor(workers=None, dask=None, timeout="10s"):
         raise InputError(f"--workers {workers!r}: expected a positive integer")
     if workers == 1:
         return SerialExecutor()
-    return ProcessPoolExecutor(max_workers=workers)
+    # the workers share the cores: one thread each (`skdgmpm.parallel`)
+    return ProcessPoolExecutor(max_workers=workers, initializer=set_threads, initargs=(1,))
 
 
 def _dask_executor(address, timeout):

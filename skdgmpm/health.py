@@ -14,6 +14,7 @@ from numba import njit
 from skdgmpm.materials.points import tangent_call, tangent_point
 
 from .equations import acoustic, embed
+from . import parallel
 from .kernel_cache import kernel_factory, scratch
 from .system import DIMENSION
 
@@ -137,6 +138,7 @@ def assess(materials, points, U, Q):
     rho = np.array([m.rho for m in materials.materials])
     finite, J, lowest, speed = np.empty(n, dtype=np.bool_), np.empty(n), np.empty(n), np.empty(n)
     N = tuple(tuple(float(x) for x in n) for n in directions(d))       # a literal count: unrolled
-    _assess(d)(U, Q, np.asarray(points.material, dtype=np.int64), laws, params, rho, N, d,
-            finite, J, lowest, speed)
+    material, kernel = np.asarray(points.material, dtype=np.int64), _assess(d)
+    parallel.rows(n, lambda lo, hi: kernel(U[lo:hi], Q[lo:hi], material[lo:hi], laws, params, rho, N, d,
+                                           finite[lo:hi], J[lo:hi], lowest[lo:hi], speed[lo:hi]))
     return Health(finite, np.where(finite, J, 1.0), lowest, speed)

@@ -169,8 +169,9 @@ def install():
 # ---------------------------------------------------------------- one kernel per literal size
 def kernel_factory(factory):
     """``factory(*sizes)`` returns a Python function closing over the literal ``sizes`` (ints or
-    None); the decorated name, called with the sizes, returns it compiled (``njit(cache=True)``),
-    one kernel per distinct sizes, memoised. See the module's docstring."""
+    None); the decorated name, called with the sizes, returns it compiled (``njit(cache=True,
+    nogil=True)``: threads run it in parallel, `skdgmpm.parallel`), one kernel per distinct sizes,
+    memoised. See the module's docstring."""
     kernels = {}
 
     @functools.wraps(factory)
@@ -178,7 +179,7 @@ def kernel_factory(factory):
         try:
             return kernels[sizes]
         except KeyError:
-            k = kernels[sizes] = njit(cache=True)(factory(*sizes))
+            k = kernels[sizes] = njit(cache=True, nogil=True)(factory(*sizes))
             return k
 
     kernel.kernels = kernels

@@ -13,6 +13,7 @@ from skfem import CellBasis
 
 from skdgmpm import forms
 
+from . import parallel
 from .kernel_cache import kernel_factory, scratch
 
 
@@ -133,14 +134,17 @@ class ParticleMap:
         """Nodal (U, Q) from particle (U, Q) (n, d*d + d): U and the stress by `project`, the
         nodal velocity from the projected momentum (v = p / rho), in one compiled pass."""
         U_n, Q_n = np.empty((self.P2G.shape[0], U.shape[1])), np.empty((self.P2G.shape[0], Q.shape[1]))
-        _project_state(d)(self.P2G.indptr, self.P2G.indices, self.P2G.data, U, Q, self.rho, U_n, Q_n)
+        A, kernel = self.P2G, _project_state(d)
+        parallel.rows(len(U_n), lambda lo, hi: kernel(A.indptr[lo:hi + 1], A.indices, A.data, U, Q, self.rho[lo:hi],
+                                                      U_n[lo:hi], Q_n[lo:hi]))
         return U_n, Q_n
 
     def interpolate(self, nodal):
         """S nodal for nodal values (n_dofs, nc): one compiled pass, each row summed in CSR order
         as scipy's product does."""
         out = np.empty((self.S.shape[0], nodal.shape[1]))
-        _interpolate(nodal.shape[1])(self.S.indptr, self.S.indices, self.S.data, nodal, out)
+        S, kernel = self.S, _interpolate(nodal.shape[1])
+        parallel.rows(len(out), lambda lo, hi: kernel(S.indptr[lo:hi + 1], S.indices, S.data, nodal, out[lo:hi]))
         return out
 
 

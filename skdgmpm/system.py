@@ -6,6 +6,7 @@ docs/CONVENTIONS.md); ``d`` is the scene dimension.
 import numpy as np
 
 from .equations import add_flux, embed as _embed_point
+from . import parallel
 from .kernel_cache import kernel_factory, scratch
 
 
@@ -115,5 +116,6 @@ def volume_flux(Q, stiffness, out=None):
     if not isinstance(stiffness, Stiffness):
         stiffness = Stiffness(stiffness)
     R = np.empty_like(Q) if out is None else out
-    _volume_flux(len(stiffness[2]))(Q, *stiffness, out is not None, R)
+    (indptr, indices, data), kernel, add = stiffness, _volume_flux(len(stiffness[2])), out is not None
+    parallel.rows(len(R), lambda lo, hi: kernel(Q, indptr[lo:hi + 1], indices, data, add, R[lo:hi]))
     return R

@@ -1,0 +1,81 @@
+"""Threads never change answers: the chunked passes (`skdgmpm.parallel`) give the same bits for
+1, 2 and 3 threads (3: chunks of unequal length), for every scheme. The chunk length is lowered
+so that these small grids are split into several chunks, as a 256^2 grid is."""
+import numpy as np
+import pytest
+
+from skdgmpm import parallel
+from skdgmpm.build import build
+from skdgmpm.scene import load_scene
+
+STEPS = 4
+CASES = {
+    "dgmpm-ctu": ("plate_impact_neohookean_2d", ["grid.cells=[20, 15]", 'method.transverse="ctu"']),
+    "dgmpm-dcu-rk2": ("plate_impact_neohookean_2d", ["grid.cells=[20, 15]", 'method.transverse="dcu"',
+                                                     'method.integrator="rk2"', "method.cfl=0.4"]),
+    "dgmpm-ctu-j2": ("plate_impact_j2_2d", ["grid.cells=[16, 12]"]),
+    "ader-dgmpm-1": ("plate_impact_neohookean_2d", ['method.name="ader-dgmpm"', "method.cfl=0.4",
+                                                    "grid.cells=[12, 9]", "particles.per_cell=[0.25, 0.75]"]),
+    "rk-dgfem-1": ("plate_impact_neohookean_2d", ['method.name="rk-dgfem"', 'method.integrator="rk2"',
+                                                  "method.cfl=0.4", "grid.cells=[12, 9]"]),
+    "mpm-cd-cpgimp": ("mms_axis_aligned_2d", ["grid.cells=[12, 12]", 'method.name="mpm"', 'method.update="cd"']),
+    "dgmpm-1d": ("bar_elastic_1d", ["grid.cells=200", "particles.per_cell=2", "method.cfl=0.5"]),
+}
+
+
+def _run(name, threads):
+    parallel.set_threads(threads)
+    scene, overrides = CASES[name]
+    disc = build(load_scene(scene, overrides))
+    state = disc.initial
+    for _ in range(STEPS):
+        state = disc.stepper.step(state)
+    return state
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_bits_do_not_depend_on_the_thread_count(name, monkeypatch):
+    monkeypatch.setattr(parallel, "MIN_ROWS", 16)
+    try:
+        runs = [_run(name, n) for n in (1, 2, 3)]
+    finally:
+        parallel.set_threads(None)
+    one = runs[0]
+    assert one.step == STEPS and np.all(np.isfinite(one.U))
+    for other in runs[1:]:
+        assert other.t == one.t
+        for a, b in ((one.U, other.U), (one.Q, other.Q), (one.x, other.x)):
+            assert np.array_equal(a, b)
+        if one.dofs is not None:
+            assert np.array_equal(one.dofs, other.dofs)
+        if one.history is not None:
+            assert np.array_equal(one.history, other.history)
+
+
+def test_chunks_cover_the_rows_once():
+    for n in (0, 1, 5, 4097, 10_000):
+        for parts in (1, 2, 3, 7):
+            b = parallel.bounds(n, parts)
+            assert b[0][0] == 0 and b[-1][1] == n
+            assert all(hi == lo for (_, hi), (lo, _) in zip(b[:-1], b[1:]))
+
+
+def test_first_bad_is_the_serial_answer(monkeypatch):
+    monkeypatch.setattr(parallel, "MIN_ROWS", 4)
+    bad = np.zeros(40, bool)
+    bad[[13, 31]] = True
+
+    def chunk(lo, hi):
+        hits = np.flatnonzero(bad[lo:hi])
+        return int(hits[0]) if len(hits) else -1
+    try:
+        for n in (1, 2, 3):
+            parallel.set_threads(n)
+            assert parallel.first_bad(40, chunk) == 13
+    finally:
+        parallel.set_threads(None)
+
+
+def test_a_bad_thread_count_is_refused():
+    with pytest.raises(ValueError, match="threads = 0"):
+        parallel.set_threads(0)
