@@ -11,8 +11,10 @@ once-per-process start-up (imports, loading the compiled kernels from numba's di
 measured apart, on a 4 x 4 run of the same method before it. Step times are the
 median over ``steps`` timed steps after ``warmup`` steps. A degree of freedom is one state vector
 at a grid node (DG) or at a particle (MPM); per-stage times divide by the right-hand sides one
-step evaluates (Euler 1, RK2 2, RK4 4, ADER 1 predictor + corrector). Timings are measurements on
-the machine at hand, never test results.
+step evaluates (Euler 1, RK2 2, RK4 4, ADER 1 predictor + corrector). Each row runs on a given
+number of threads (``--threads 1,2``; `skdgmpm.parallel`): a one-thread row's CPU time per cell
+is the cost per core, and the rows of several thread counts give the speed-up (same bits for
+any count). Timings are measurements on the machine at hand, never test results.
 """
 import json
 import multiprocessing
@@ -50,11 +52,13 @@ METHODS["dgmpm-ctu-j2"] = [*METHODS["dgmpm-ctu"], *J2]
 METHODS["ader-dgmpm-1-j2"] = [*METHODS["ader-dgmpm-1"], *J2]
 
 
-def _measure(method, n, steps, warmup):
-    """One benchmark in this process: returns a row (dict)."""
+def _measure(method, n, steps, warmup, threads=1):
+    """One benchmark in this process, its passes on ``threads`` threads: returns a row (dict)."""
+    from . import parallel
     from .build import build
     from .scene import load_scene
 
+    parallel.set_threads(threads)
     # once per process, not per grid: imports and loading the compiled kernels from numba's
     # cache, paid by a tiny run of the same method (a study building many grids pays it once)
     t0 = time.perf_counter()
@@ -82,7 +86,7 @@ def _measure(method, n, steps, warmup):
     dofs = len(disc.particles) if method.startswith("mpm") else int(stepper.n_dofs)
     stages = EVALUATIONS.get(stepper.integrator, 1)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss      # KiB on Linux
-    return {"method": method, "cells": cells, "particles": len(disc.particles), "dofs": dofs,
+    return {"method": method, "cells": cells, "threads": threads, "particles": len(disc.particles), "dofs": dofs,
             "startup_s": startup, "setup_s": setup, "step_s": step, "setup_in_steps": setup / step,
             "us_per_cell_step": 1e6 * step / cells,
             "cpu_us_per_cell_step": 1e6 * statistics.median(cpu) / cells, "s_per_dof_step": step / dofs,
@@ -99,18 +103,18 @@ def _child(queue, *args):
         queue.put({"error": f"{type(exc).__name__}: {exc}"})
 
 
-def measure(method, n, steps=5, warmup=2):
+def measure(method, n, steps=5, warmup=2, threads=1):
     """Run one benchmark in a fresh process (spawned, so its peak memory is its own)."""
     if method not in METHODS:
         raise InputError(f"--methods: {method!r} is not a benchmark (known: {', '.join(METHODS)})")
     ctx = multiprocessing.get_context("spawn")
     queue = ctx.Queue()
-    proc = ctx.Process(target=_child, args=(queue, method, n, steps, warmup))
+    proc = ctx.Process(target=_child, args=(queue, method, n, steps, warmup, threads))
     proc.start()
     row = queue.get()
     proc.join()
     if "error" in row:
-        return {"method": method, "cells": n * n, "error": row["error"]}
+        return {"method": method, "cells": n * n, "threads": threads, "error": row["error"]}
     return row
 
 
@@ -121,14 +125,14 @@ def machine():
 
 
 def format_table(rows):
-    head = (f"{'method':<16}{'cells':>8}{'setup s':>9}{'ms/step':>10}{'us/cell':>9}{'ns/dof':>8}"
+    head = (f"{'method':<16}{'cells':>8}{'thr':>4}{'setup s':>9}{'ms/step':>10}{'us/cell':>9}{'ns/dof':>8}"
             f"{'cpu us/cell':>12}{'ns/dof/stage':>13}{'particles/s':>12}{'peak MiB':>10}{'setup/step':>11}")
     lines = [head, "-" * len(head)]
     for r in rows:
         if "error" in r:
-            lines.append(f"{r['method']:<16}{r['cells']:>8}  failed: {r['error']}")
+            lines.append(f"{r['method']:<16}{r['cells']:>8}{r.get('threads', 1):>4}  failed: {r['error']}")
             continue
-        lines.append(f"{r['method']:<16}{r['cells']:>8}{r['setup_s']:>9.2f}{1e3 * r['step_s']:>10.2f}"
+        lines.append(f"{r['method']:<16}{r['cells']:>8}{r.get('threads', 1):>4}{r['setup_s']:>9.2f}{1e3 * r['step_s']:>10.2f}"
                      f"{r['us_per_cell_step']:>9.2f}{1e9 * r['s_per_dof_step']:>8.0f}"
                      f"{r['cpu_us_per_cell_step']:>12.2f}{1e9 * r['s_per_dof_stage']:>13.0f}{r['particles_per_s']:>12.3g}"
                      f"{r['peak_MiB']:>10.0f}{r['setup_in_steps']:>11.1f}")
@@ -144,21 +148,40 @@ def format_stages(rows):
             continue
         total = sum(stages.values())
         parts = ", ".join(f"{name} {1e3 * s:.2f} ms ({100 * s / total:.0f}%)" for name, s in stages.items())
-        lines.append(f"{r['method']} {r['cells']} cells: {parts}")
+        lines.append(f"{r['method']} {r['cells']} cells, {r.get('threads', 1)} thread(s): {parts}")
     return "\n".join(lines)
 
 
-def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True):
-    """Run every (method, size); print the table; write JSON if asked. Returns the rows."""
+def format_scaling(rows):
+    """Per (method, cells) measured on several thread counts: wall time per step and the speed-up
+    over one thread."""
+    groups = {}
+    for r in rows:
+        if "error" not in r:
+            groups.setdefault((r["method"], r["cells"]), {})[r["threads"]] = r["step_s"]
+    lines = []
+    for (method, cells), times in groups.items():
+        if len(times) < 2 or 1 not in times:
+            continue
+        parts = ", ".join(f"{n} thread{'s' if n > 1 else ''} {1e3 * t:.2f} ms (x{times[1] / t:.2f})"
+                          for n, t in sorted(times.items()))
+        lines.append(f"{method} {cells} cells: {parts}")
+    return "\n".join(lines)
+
+
+def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threads=(1,)):
+    """Run every (method, size, thread count); print the table; write JSON if asked. Returns the
+    rows. The CPU time per cell of a one-thread row is the cost per core."""
     from .run import progress_bar
 
     rows = []
-    bar = progress_bar(progress, len(methods) * len(sizes), unit="run")
+    bar = progress_bar(progress, len(methods) * len(sizes) * len(threads), unit="run")
     for method in methods:
         for n in sizes:
-            bar.set_description(f"{method} {n}x{n}")
-            rows.append(measure(method, n, steps, warmup))
-            bar.update()
+            for t in threads:
+                bar.set_description(f"{method} {n}x{n} {t} thread{'s' if t > 1 else ''}")
+                rows.append(measure(method, n, steps, warmup, t))
+                bar.update()
     bar.close()
     if json_path is not None:
         with open(json_path, "w") as fh:

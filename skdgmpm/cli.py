@@ -122,16 +122,21 @@ def _cmd_compare(args):
 
 
 def _cmd_bench(args):
-    from . import bench, study
+    from . import bench, parallel, study
 
     methods = [m for m in args.methods.split(",") if m] if args.methods != "all" else list(bench.METHODS)
     sizes = study._int_list(args.sizes, "--sizes")
+    cores = parallel.available()
+    threads = study._int_list(args.threads, "--threads") if args.threads else sorted({1, cores})
     rows = bench.main(methods, sizes, steps=args.steps, warmup=args.warmup, json_path=args.json,
-                      progress=not args.quiet)
+                      progress=not args.quiet, threads=threads)
     m = bench.machine()
     print(f"{m['processor']}, {m['cpus']} CPUs, Python {m['python']}")
     print(bench.format_table(rows))
     print("\nstages (own wall time per step):\n" + bench.format_stages(rows))
+    scaling = bench.format_scaling(rows)
+    if scaling:
+        print("\nthreads (wall time per step, speed-up over one thread):\n" + scaling)
     return 0
 
 
@@ -236,6 +241,8 @@ def main(argv=None):
     p.add_argument("--steps", type=int, default=5, help="timed steps (median)")
     p.add_argument("--warmup", type=int, default=2, help="untimed steps first")
     p.add_argument("--json", default=None, help="also write the rows and the machine to this JSON file")
+    p.add_argument("--threads", default=None,
+                   help="thread counts to measure, e.g. 1,2 (default: 1 and every core: the scaling)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_bench)
 

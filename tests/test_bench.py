@@ -8,7 +8,7 @@ from skdgmpm.cli import main
 def test_bench_command_prints_table_and_writes_json(tmp_path, capsys):
     path = tmp_path / "bench.json"
     assert main(["bench", "--sizes", "8", "--methods", "dgmpm-ctu,rk-dgfem-1", "--steps", "2", "--warmup", "1",
-                 "--json", str(path), "--quiet"]) == 0
+                 "--threads", "1", "--json", str(path), "--quiet"]) == 0
     text = capsys.readouterr().out
     assert "dgmpm-ctu" in text and "rk-dgfem-1" in text and "failed" not in text
     data = json.load(open(path))
@@ -16,6 +16,16 @@ def test_bench_command_prints_table_and_writes_json(tmp_path, capsys):
     row = data["rows"][0]
     assert row["cells"] == 64 and row["dofs"] == 4 * 64 and row["step_s"] > 0 and row["peak_MiB"] > 0
     assert row["cpu_us_per_cell_step"] > 0 and row["startup_s"] > 0
+
+
+def test_bench_measures_each_thread_count(tmp_path, capsys):
+    path = tmp_path / "bench.json"
+    assert main(["bench", "--sizes", "8", "--methods", "dgmpm-dcu", "--steps", "1", "--warmup", "1",
+                 "--threads", "1,2", "--json", str(path), "--quiet"]) == 0
+    text = capsys.readouterr().out
+    rows = json.load(open(path))["rows"]
+    assert [r["threads"] for r in rows] == [1, 2]
+    assert "speed-up over one thread" in text and "2 threads" in text
 
 
 def test_unknown_benchmark_is_a_clear_error():
