@@ -14,6 +14,7 @@ that law's branch (a second inlined copy of the same code would only cost compil
 import numpy as np
 from numba import njit
 
+from skdgmpm import parallel
 from skdgmpm.kernel_cache import kernel_factory
 
 from . import gavrilyuk, hencky_j2, j2_plasticity, linear_elastic, mooney_rivlin, neo_hookean, saint_venant_kirchhoff
@@ -113,5 +114,6 @@ def tangent_block(material, F, d):
     flat = np.ascontiguousarray(F.reshape(-1, 3, 3))
     law, prm = material.point_law
     C = np.empty((len(flat), d, d, d, d))
-    _tangents(d)(law, prm, flat, C)
+    kernel = _tangents(d)
+    parallel.rows(len(flat), lambda lo, hi: kernel(law, prm, flat[lo:hi], C[lo:hi]))
     return C.reshape(shape + (d, d, d, d))

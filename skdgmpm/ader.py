@@ -33,7 +33,7 @@ from numpy.polynomial import legendre
 
 from skdgmpm.materials.points import law_table
 
-from . import system
+from . import parallel, system
 from .ader_kernels import interior_flux_sum, traces
 from .dgfem import DGFEM
 from .equations import add_flux
@@ -47,26 +47,27 @@ def _divergence_cells(Q, D, out):
     and derivative matrices D (d, nel, n, n)."""
     d, n = D.shape[0], Q.shape[2]
     # literal sizes, the loops unrolled: d always, n for Q1 and Q2 cells in 2D (2 x 2, 3 x 3 points)
-    _divergence_cells_kernel(d, n if d == 2 and n in (4, 9) else None)(Q, D, out)
+    kernel = _divergence_cells_kernel(d, n if d == 2 and n in (4, 9) else None)
+    parallel.rows(Q.shape[1], lambda lo, hi: kernel(Q, D, out, lo, hi))      # cells lo:hi
 
 
 @kernel_factory
 def _divergence_cells_kernel(d, n):
     if n is None:                       # n read at run time
-        def divergence_cells(Q, D, out):
-            _divergence_cells_dn(Q, D, out, d, Q.shape[2])
+        def divergence_cells(Q, D, out, lo, hi):
+            _divergence_cells_dn(Q, D, out, d, Q.shape[2], lo, hi)
     else:
-        def divergence_cells(Q, D, out):
-            _divergence_cells_dn(Q, D, out, d, n)
+        def divergence_cells(Q, D, out, lo, hi):
+            _divergence_cells_dn(Q, D, out, d, n, lo, hi)
     return divergence_cells
 
 
 @njit(cache=True, inline="always")
-def _divergence_cells_dn(Q, D, out, d, n):
+def _divergence_cells_dn(Q, D, out, d, n, lo, hi):
     nc = d * d + d
     s, o = scratch((nc,)), scratch((nc,))
     for b in range(Q.shape[0]):
-        for c in range(Q.shape[1]):
+        for c in range(lo, hi):
             for k in range(n):
                 for v in range(nc):
                     o[v] = 0.0
@@ -88,32 +89,35 @@ def _picard_update(U0, T, div, dt, scale, u_hat, new):
     u_hat (S or 1, M) (one row: the same at every node), M = n_points nc; scale (nc,)."""
     # 2D, S1T1 / S2T2: literal sizes, so the sum over the nodes unrolls and the loop over the points vectorises
     sizes = (6, len(div)) if len(scale) == 6 and len(div) in (2, 3) else (None, None)
-    return _picard_update_kernel(*sizes)(U0, T, div, dt, scale, u_hat, new)
+    kernel = _picard_update_kernel(*sizes)
+    # points lo:hi in parallel; the largest change is the largest of the chunks' (nan if one is)
+    changes = parallel.rows(new.shape[1] // len(scale),
+                            lambda lo, hi: kernel(U0, T, div, dt, scale, u_hat, new, lo, hi))
+    return np.nan if any(c != c for c in changes) else max(changes)
 
 
 @kernel_factory
 def _picard_update_kernel(nc, n_r):
     if nc is None:                      # sizes read at run time
-        def picard_update(U0, T, div, dt, scale, u_hat, new):
-            return _picard_update_nc(U0, T, div, dt, scale, u_hat, new, len(scale), len(div))
+        def picard_update(U0, T, div, dt, scale, u_hat, new, lo, hi):
+            return _picard_update_nc(U0, T, div, dt, scale, u_hat, new, len(scale), len(div), lo, hi)
     else:
-        def picard_update(U0, T, div, dt, scale, u_hat, new):
-            return _picard_update_nc(U0, T, div, dt, scale, u_hat, new, nc, n_r)
+        def picard_update(U0, T, div, dt, scale, u_hat, new, lo, hi):
+            return _picard_update_nc(U0, T, div, dt, scale, u_hat, new, nc, n_r, lo, hi)
     return picard_update
 
 
 @njit(cache=True, inline="always")
-def _picard_update_nc(U0, T, div, dt, scale, u_hat, new, nc, n_r):
-    n_points = new.shape[1] // nc
+def _picard_update_nc(U0, T, div, dt, scale, u_hat, new, nc, n_r, lo, hi):
     big = np.zeros(nc)                  # max |new - u_hat| per component, nan once one is nan
     for s in range(len(new)):
         out, U0_s, u_s = new[s], U0[s if len(U0) > 1 else 0], u_hat[s if len(u_hat) > 1 else 0]
-        for j in range(len(out)):
+        for j in range(lo * nc, hi * nc):
             acc = 0.0
             for r in range(n_r):
                 acc += T[s, r] * div[r, j]
             out[j] = U0_s[j] - dt * acc
-        for p in range(n_points):
+        for p in range(lo, hi):
             for v in range(nc):
                 x = abs(out[p * nc + v] - u_s[p * nc + v])
                 if x > big[v] or x != x:

@@ -12,6 +12,7 @@ u_hat, q_hat is (S, n_points, nc) at S time nodes.
 """
 from skdgmpm.materials.points import tangent_call, tangent_point
 
+from . import parallel
 from .equations import add_normal_flux, riemann
 from .faces import gather_row as _gather
 from .kernel_cache import kernel_factory, scratch
@@ -22,8 +23,10 @@ def interior_flux_sum(T_L, T_R, u_hat, q_hat, rho_L, rho_R, N, mat_L, mat_R, law
     """flux[f] = sum_s weights[s] F_N(Q*[s, f]) for every interior row f (flux (nf, nc)), both
     sides traced from the predictor (u_hat, q_hat) at each node; mat_L, mat_R (nf,) material of
     each side, (laws, params) the law table. Returns the first row that is not hyperbolic, or -1."""
-    return _interior_flux_sum(N.shape[1])(T_L, T_R, u_hat, q_hat, rho_L, rho_R, N, mat_L, mat_R, laws, params,
-                                          weights, flux)
+    kernel, csr = _interior_flux_sum(N.shape[1]), parallel.csr_rows
+    return parallel.first_bad(len(N), lambda lo, hi: kernel(
+        csr(T_L, lo, hi), csr(T_R, lo, hi), u_hat, q_hat, rho_L[lo:hi], rho_R[lo:hi], N[lo:hi], mat_L[lo:hi],
+        mat_R[lo:hi], laws, params, weights, flux[lo:hi]))
 
 
 @kernel_factory

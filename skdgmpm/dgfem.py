@@ -18,12 +18,11 @@ from numba import njit
 from skfem import (CellBasis, ElementDG, ElementLineP1, ElementLineP2, ElementQuad1, ElementQuad2,
                    ElementQuadDG, ElementQuadP)
 
-from . import forms, system
+from . import forms, integrators, parallel, system
 from .elements import ElementLineLagrange
 from .equations import add_flux
 from .errors import InputError
 from .faces import interior_faces
-from . import integrators
 from .kernel_cache import kernel_factory
 from .limiter import SlopeLimiter
 from .particles import Particles
@@ -38,7 +37,8 @@ def _apply_blocks(blocks, cell_dofs, R, out):
     cost ~4 ms a call at 128^2)."""
     nb, nc = blocks.shape[1], R.shape[1]
     literal = nc == 6 and nb in (4, 9)      # Q1, Q2 in 2D: literal sizes, the loops unrolled
-    _apply_blocks_kernel(nb if literal else None, nc if literal else None)(blocks, cell_dofs, R, out)
+    kernel = _apply_blocks_kernel(nb if literal else None, nc if literal else None)
+    parallel.rows(len(blocks), lambda lo, hi: kernel(blocks[lo:hi], cell_dofs[lo:hi], R, out))    # cells lo:hi
 
 
 @kernel_factory

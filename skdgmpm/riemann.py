@@ -8,6 +8,7 @@ point functions.
 import numpy as np
 from numba import njit
 
+from . import parallel
 from .equations import add_normal_flux, ctu_split, fluctuations, godunov, impedance as _impedance, riemann
 from .errors import InstabilityError
 from .kernel_cache import kernel_factory, scratch
@@ -131,8 +132,10 @@ def godunov_fluxes(Q_L, C_L, rho_L, Q_R, C_R, rho_R, N):
     Q = [P, v] (nf, d*d + d) and linearisations (tangents C, densities rho) in one pass over the
     faces: traction, both impedances, `godunov_state`, flux. Returns three (nf, d*d + d) arrays."""
     flux, fluct_L, fluct_R = np.empty_like(Q_L), np.empty_like(Q_L), np.empty_like(Q_L)
-    bad = _godunov_fluxes(N.shape[1])(Q_L, C_L, np.asarray(rho_L, dtype=float), Q_R, C_R,
-                                      np.asarray(rho_R, dtype=float), N, flux, fluct_L, fluct_R)
+    rho_L, rho_R, kernel = np.asarray(rho_L, dtype=float), np.asarray(rho_R, dtype=float), _godunov_fluxes(N.shape[1])
+    bad = parallel.first_bad(len(N), lambda lo, hi: kernel(
+        Q_L[lo:hi], C_L[lo:hi], rho_L[lo:hi], Q_R[lo:hi], C_R[lo:hi], rho_R[lo:hi], N[lo:hi], flux[lo:hi],
+        fluct_L[lo:hi], fluct_R[lo:hi]))
     if bad >= 0:
         _not_hyperbolic(bad)
     return flux, fluct_L, fluct_R
