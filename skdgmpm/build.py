@@ -205,6 +205,7 @@ def build(scene):
             stepper = ADERDGMPM(grid, mats, bcs, cell_material, order=order, cfl=cfl, particles_in=particles,
                                 mls_order=method.get("mls_order", -1), backmap=method.get("backmap", "pic"),
                                 limiter=method.get("limiter", "none"))
+    grid.release_caches()                   # the operators are assembled: memory back
     solution = exact_solution(scene)
     if getattr(solution, "body_force", None) is not None:    # manufactured solution: source rho0 b
         stepper.body_force = solution.body_force

@@ -80,9 +80,9 @@ class DGMPM(GodunovScheme):
         g, p = self.grid, self.particles
         self.d = g.dim
         basis, slot = particle_basis(g, p)
-        self.ops = VolumeOperators.assemble(basis)
-        self.stiffness = system.Stiffness(self.ops.stiffness)
-        self.map = ParticleMap.build(interpolation_matrix(basis, slot), p.volume, p.rho0, self.ops.lumped)
+        ops = VolumeOperators.assemble(basis)           # kept as the step reads them, not twice
+        self.stiffness = system.Stiffness(ops.stiffness)
+        self.map = ParticleMap.build(interpolation_matrix(basis, slot), p.volume, p.rho0, ops.lumped)
         self.n_dofs = basis.N
         self.dof_cell = np.empty(basis.N, dtype=np.int64)
         self.dof_cell[basis.element_dofs] = np.arange(g.submesh.nelements)[None, :]
@@ -99,43 +99,26 @@ class DGMPM(GodunovScheme):
         # -int Phi F* over the interior faces as a gather over each node's faces (`euler_update`)
         f = self.interior
         self.gather_interior = _csr((sp.diags(f.measure) @ (f.T_R - f.T_L)).T.tocsr())
-        self.inv_M = 1.0 / self.ops.lumped
+        self.inv_M = 1.0 / ops.lumped
 
     # ---------------------------------------------------------------- set-up
     def _setup_transverse(self):
-        """CTU topology: for each face side ("L", "R" of the interior faces, "boundary"), the
-        source cell's size across the face h and its two edges adjacent to the face (axis 0 of
-        the (2, nf) arrays), with their outward normals and their index among interior faces
-        (with the sign of the interior normal) or boundary faces (-1 where not one). DCU: empty."""
+        """CTU set-up: the boundary faces' `side_topology`; for the interior faces' sides, only
+        what the face pass reads, (h, normals (nf, 2, 2)) (face-major: a chunk of faces is a
+        slice), and the edges' gathers of the parts (`_edge_gathers`): each face writes its own
+        parts, each edge sums those it receives, the same for any thread count. DCU: empty."""
         empty = (np.zeros(0), np.zeros((2, 0, 2)), np.zeros((2, 0), np.int64), np.zeros((2, 0), np.int64),
                  np.zeros((2, 0)))
         self.ctu = None
-        self.topology = {"L": empty, "R": empty, "boundary": empty}
+        self.topology = {"boundary": empty}
         self.split_topology = {"L": (empty[0], np.zeros((0, 2, 2))), "R": (empty[0], np.zeros((0, 2, 2)))}
         if self.transverse != "ctu" or self.d != 2:
             return
-        m = self.grid.submesh
-        pos_int = -np.ones(m.nfacets, dtype=np.int64)
-        pos_int[self.interior.facets] = np.arange(len(self.interior))
-        pos_bnd = -np.ones(m.nfacets, dtype=np.int64)
-        pos_bnd[self.boundary.facets] = np.arange(len(self.boundary))
-        for side, faces, cells in (("L", self.interior, self.interior.cell_L),
-                                   ("R", self.interior, self.interior.cell_R),
-                                   ("boundary", self.boundary, self.boundary.cell_L)):
-            k = np.argmax(m.t2f[:, cells] == faces.facets[None, :], axis=0)
-            j = m.t2f[(k[None, :] + np.array([1, 3])[:, None]) % 4, cells[None, :]]     # (2, nf)
-            j_int, j_bnd = pos_int[j], pos_bnd[j]
-            sign = np.where(self.interior.cell_L[j_int] == cells, 1.0, -1.0)
-            n = np.where((j_int >= 0)[..., None], sign[..., None] * self.interior.normal[j_int],
-                         self.boundary.normal[j_bnd])
-            h = self.cell_volume[cells] / faces.measure
-            self.topology[side] = tuple(np.ascontiguousarray(a) for a in (h, n, j_int, j_bnd, sign))
-        # the face pass writes each side's parts face by face (face-major normals), the edges
-        # gather them (`edge_corrections`): no scatter, the same for any thread count
-        for side in ("L", "R"):
-            h, n = self.topology[side][:2]
+        self.topology["boundary"] = self.side_topology("boundary")
+        sides = {side: self.side_topology(side) for side in ("L", "R")}
+        for side, (h, n, *_) in sides.items():
             self.split_topology[side] = (h, np.ascontiguousarray(n.transpose(1, 0, 2)))
-        self.to_interior, self.to_boundary = self._edge_gathers()
+        self.to_interior, self.to_boundary = self._edge_gathers(sides)
         frame = np.zeros((len(self.boundary), 2, 2))
         free_v = np.zeros((len(self.boundary), 2), bool)
         free_t = np.zeros((len(self.boundary), 2), bool)
@@ -222,7 +205,28 @@ class DGMPM(GodunovScheme):
         (``_boundary_filter``)."""
         return np.einsum("fkj,fj->fk", self.ctu, corr_bnd)
 
-    def _edge_gathers(self):
+    def side_topology(self, side):
+        """CTU topology of one face side ("L", "R" of the interior faces, "boundary"): the
+        source cell's size across the face h and its two edges adjacent to the face (axis 0 of
+        the (2, nf) arrays), with their outward normals and their index among interior faces
+        (with the sign of the interior normal) or boundary faces (-1 where not one)."""
+        m = self.grid.submesh
+        pos_int = -np.ones(m.nfacets, dtype=np.int64)
+        pos_int[self.interior.facets] = np.arange(len(self.interior))
+        pos_bnd = -np.ones(m.nfacets, dtype=np.int64)
+        pos_bnd[self.boundary.facets] = np.arange(len(self.boundary))
+        faces = self.boundary if side == "boundary" else self.interior
+        cells = {"L": self.interior.cell_L, "R": self.interior.cell_R, "boundary": self.boundary.cell_L}[side]
+        k = np.argmax(m.t2f[:, cells] == faces.facets[None, :], axis=0)
+        j = m.t2f[(k[None, :] + np.array([1, 3])[:, None]) % 4, cells[None, :]]     # (2, nf)
+        j_int, j_bnd = pos_int[j], pos_bnd[j]
+        sign = np.where(self.interior.cell_L[j_int] == cells, 1.0, -1.0)
+        n = np.where((j_int >= 0)[..., None], sign[..., None] * self.interior.normal[j_int],
+                     self.boundary.normal[j_bnd])
+        h = self.cell_volume[cells] / faces.measure
+        return tuple(np.ascontiguousarray(a) for a in (h, n, j_int, j_bnd, sign))
+
+    def _edge_gathers(self, sides):
         """CSR rows, one per interior edge, of the parts (rows of `interior_pass`'s G flattened,
         4 f + 2 side + e) that it receives and their signs; and per boundary edge, the parts and
         the opposite edge's parts (`edge_corrections`). Within a row the parts are in the order a
@@ -231,7 +235,7 @@ class DGMPM(GodunovScheme):
         part = 4 * np.arange(nf)[None, :] + np.arange(2)[:, None]            # (2 edges, nf)
         rows = {"interior": ([], [], []), "boundary": ([], [], [])}
         for s, side in enumerate(("L", "R")):
-            _, _, j_int, j_bnd, sign = self.topology[side]
+            _, _, j_int, j_bnd, sign = sides[side]
             for e in range(2):
                 k = j_int[e] >= 0
                 rows["interior"][0].append(j_int[e][k])

@@ -53,7 +53,7 @@ def test_interior_pass_matches_batched_path(transverse):
     if transverse == "ctu":
         corr = np.zeros_like(ref)
         for side, w in (("L", fluct_L), ("R", fluct_R)):
-            h, n, j_int, j_bnd, sign = st.topology[side]
+            h, n, j_int, j_bnd, sign = st.side_topology(side)
             _, C, rho = sides[side]
             transverse_fluxes(w, C, rho, -dt / (2.0 * h), n, j_int, j_bnd, sign, corr, ref_bnd)
         ref = ref + corr
