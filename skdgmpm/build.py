@@ -206,6 +206,12 @@ def build(scene):
                                 mls_order=method.get("mls_order", -1), backmap=method.get("backmap", "pic"),
                                 limiter=method.get("limiter", "none"))
     grid.release_caches()                   # the operators are assembled: memory back
+    guard = method.get("cfl_guard", "predict")
+    if guard not in ("predict", "largest"):
+        raise InputError(f"{scene.where('method.cfl_guard')} = {guard!r}: expected 'predict' (a step scaled by "
+                         "the last step's wave speed-up, rarely repeated) or 'largest' (the largest admissible step)")
+    if name != "mpm":
+        stepper.cfl_guard = guard
     solution = exact_solution(scene)
     if getattr(solution, "body_force", None) is not None:    # manufactured solution: source rho0 b
         stepper.body_force = solution.body_force
