@@ -15,8 +15,13 @@ EXIT_INTERRUPTED = 75    # EX_TEMPFAIL: stopped by SIGINT or SIGTERM after a che
 
 
 def _cmd_run(args):
+    from . import parallel
     from .run import run
 
+    if args.threads is not None:
+        if args.threads < 1:
+            raise InputError(f"--threads {args.threads}: expected a whole number >= 1")
+        parallel.set_threads(args.threads)      # the scene's run.threads, if set, wins
     if args.resume is not None:
         if args.case is not None or args.set or args.force:
             raise InputError(f"--resume {args.resume}: give no scene, --set or --force: the run goes on with "
@@ -195,6 +200,9 @@ def main(argv=None):
     p = sub.add_parser("run", help="run a scene")
     p.add_argument("case", nargs="?", default=None,
                    help="scene name from cases/ (see 'skdgmpm list') or path to a .toml")
+    p.add_argument("--threads", type=int, default=None,
+                   help="threads of the compiled passes (default: run.threads, $SKDGMPM_THREADS or every core; "
+                        "the answers are the same for any count)")
     p.add_argument("--resume", default=None, metavar="DIR",
                    help="continue the run checkpointed in DIR (stopped by SIGINT/SIGTERM, or killed)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",

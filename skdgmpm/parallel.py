@@ -49,14 +49,16 @@ def threads():
 
 
 def set_threads(n):
-    """Use ``n`` threads from now on (None: back to $SKDGMPM_THREADS or every core)."""
+    """Use ``n`` threads from now on (None: back to $SKDGMPM_THREADS or every core); returns the
+    setting it replaces."""
     global _threads, _pool
     if n is not None and (not isinstance(n, int) or isinstance(n, bool) or n < 1):
         raise ValueError(f"threads = {n!r}: expected a whole number >= 1")
-    _threads = n
+    previous, _threads = _threads, n
     if _pool is not None and _pool._max_workers != threads():
         _pool.shutdown()
         _pool = None
+    return previous
 
 
 def bounds(n, parts):

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import checkpoint, guards, outdir, output
+from . import checkpoint, guards, outdir, output, parallel
 from .build import build
 from .errors import InputError, InstabilityError, OutputError
 from .exact import error_norms
@@ -88,7 +88,7 @@ class Result:
             "t_end": float(s.get("run.t_end")), "t_final": float(self.state.t),
             "startup_s": self.startup_s, "wall_s": self.wall_s,
             "wall_per_step_s": self.wall_s / max(self.state.step - 1, 1),
-            "status": self.status,
+            "threads": parallel.threads(), "status": self.status,
         }
         if self.message:
             out["message"] = self.message
@@ -192,6 +192,10 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
             raise InputError(f"{scene.where('run.frames')} = {n_frames!r} must be an integer >= 1")
     every = checkpoint.parse_every(scene)
     guards.step_limit(scene)
+    threads = scene.get("run.threads")
+    if threads is not None and not (isinstance(threads, int) and not isinstance(threads, bool) and threads >= 1):
+        raise InputError(f"{scene.where('run.threads')} = {threads!r} must be a whole number >= 1 (threads of "
+                         f"the compiled passes; default: every core)")
     if out is not None:
         out = Path(out)
         outdir.check(out, force, resume=saved is not None)
@@ -210,11 +214,14 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
     folder = None if out is None else outdir.OutputFolder(out).acquire(force, resume=saved is not None)
     if signals is None:
         signals = out is not None and threading.current_thread() is threading.main_thread()
+    previous = parallel.set_threads(threads) if threads is not None else None
     try:
         with notice:
             return _run(scene, disc, solution, stepper, state, t_end, n_frames, out, progress, max_steps,
                         on_step, begin, saved=saved, every=every, signals=signals)
     finally:
+        if threads is not None:
+            parallel.set_threads(previous)
         if folder is not None:
             folder.release()
 

@@ -79,3 +79,21 @@ def test_first_bad_is_the_serial_answer(monkeypatch):
 def test_a_bad_thread_count_is_refused():
     with pytest.raises(ValueError, match="threads = 0"):
         parallel.set_threads(0)
+
+
+def test_run_threads_key_and_option(tmp_path):
+    from skdgmpm.cli import main
+    from skdgmpm.errors import InputError
+    from skdgmpm.run import run
+
+    r = run("bar_elastic_1d", ["run.threads=2", "grid.cells=20", "run.t_end=2e-5"], progress=False)
+    assert r.summary()["threads"] == 2 and parallel._threads is None          # restored after the run
+    with pytest.raises(InputError, match="run.threads"):
+        run("bar_elastic_1d", ["run.threads=0"], progress=False)
+    assert main(["run", "bar_elastic_1d", "--threads", "0", "--quiet", "--out", str(tmp_path / "x")]) == 2
+    try:
+        assert main(["run", "bar_elastic_1d", "--threads", "1", "--set", "grid.cells=20", "--set",
+                     "run.t_end=2e-5", "--quiet", "--out", str(tmp_path / "y")]) == 0
+        assert parallel.threads() == 1
+    finally:
+        parallel.set_threads(None)
