@@ -37,6 +37,21 @@ COLLAPSE = 1e-3
 STEP_LIMIT = 10_000_000
 
 
+ENERGY_POINTS = 20_000       # above this many points, the energy every 10 steps by default
+
+
+def energy_every(scene, stepper):
+    """Steps between two rows of the energy history (and checks of the energy balance):
+    ``run.energy_every``; by default every step, or every 10th on more than ENERGY_POINTS points
+    (its cost is a pass over them: ~6 % of a DGMPM step). Frames, checkpoints and the last step
+    always get one."""
+    points = len(stepper.particles)
+    value = scene.get("run.energy_every", 1 if points <= ENERGY_POINTS else 10)
+    if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):
+        raise InputError(f"{scene.where('run.energy_every')} = {value!r} must be a whole number of steps >= 1")
+    return value
+
+
 class EnergyGuard:
     """Stops a run whose energy balance grows by more than MARGIN times the energy put in."""
 

@@ -103,3 +103,17 @@ def test_the_step_limit_stops_the_run(monkeypatch):
     _shrinking_steps(monkeypatch, lambda step: 0.25)
     r = run("bar_elastic_1d", ["grid.cells=20", "run.step_limit=60"], progress=False)
     assert r.status == "unstable" and r.state.step == 59 and "step limit reached at step 60" in r.message
+
+
+def test_energy_rows_on_the_steps_the_scene_fixes():
+    """run.energy_every = 5: the energy history (energy.csv) has the initial state, every 5th step,
+    the frames' steps and the last one; the default on a small scene is every step."""
+    r = run("bar_elastic_1d", ["run.energy_every=5", "run.frames=3"], progress=False)
+    steps = list(r.history["step"])
+    frames = [f.step for f in r.frames]
+    assert steps[0] == 0 and steps[-1] == r.state.step
+    assert set(steps) == {0, r.state.step} | {k for k in range(1, r.state.step + 1) if k % 5 == 0} | set(frames)
+    small = run("bar_elastic_1d", ["run.t_end=1e-5"], progress=False)
+    assert list(small.history["step"]) == list(range(small.state.step + 1))
+    with pytest.raises(InputError, match="run.energy_every"):
+        run("bar_elastic_1d", ["run.energy_every=0"], progress=False)
