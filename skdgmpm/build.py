@@ -189,7 +189,8 @@ def build(scene):
                         transverse=method.get("transverse", "dcu"))
     elif name == "mpm":              # the whole background grid; integrator/transverse keys are ignored
         stepper = MPM(grid, particles, mats, bcs, cfl=cfl, update=method.get("update", "usl"),
-                      shape=method.get("shape", "cpgimp"), time_step_rule=method.get("time_step", "current"))
+                      shape=method.get("shape", "cpgimp"), time_step_rule=method.get("time_step", "current"),
+                      geometry=method.get("geometry", "updated"))
     else:
         order = method.get("order", 1)
         if not 1 <= order <= 5:

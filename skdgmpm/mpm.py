@@ -88,6 +88,11 @@ class MPM(GodunovScheme):
         dt = cfl h_min / max sqrt(E / rho0) of WG08 (``time_step="bar"``: the bar wave speed of the
         undeformed material, so the step does not shrink where a stiffening law is compressed)
     update : "usf" | "usl" | "cd" | "uvf"; shape : "hat" | "ugimp" | "cpgimp"
+    geometry : "updated" (the particles move over the grid: MPM as usual) or "linearised" (small
+        displacements: the particles stay at their reference positions, so the shape functions
+        never change, as in R18 §7.1's "linearized geometrical framework"; with one particle per
+        cell and hat functions, the updated geometry makes every particle of a uniformly moving
+        zone cross a node at once, and USL blows up there, see docs/results.md)
     body_force : None or callable b(X, t) -> (n, d) (m/s^2) at reference positions
     """
 
@@ -100,6 +105,7 @@ class MPM(GodunovScheme):
     shape: str = "cpgimp"
     body_force: object = None
     time_step_rule: str = "current"
+    geometry: str = "updated"
     external_work: float = field(default=0.0, init=False)
 
     def __post_init__(self):
@@ -109,6 +115,9 @@ class MPM(GodunovScheme):
             raise InputError(f"method.shape = {self.shape!r}: expected one of {', '.join(SHAPES)}")
         if self.time_step_rule not in ("current", "bar"):
             raise InputError(f"method.time_step = {self.time_step_rule!r}: expected 'current' or 'bar'")
+        if self.geometry not in ("updated", "linearised"):
+            raise InputError(f"method.geometry = {self.geometry!r}: expected 'updated' (particles move over the "
+                             "grid) or 'linearised' (they stay at their reference positions: small displacements)")
         self.variant = UPDATES[self.update]
         self.d = self.grid.dim
         self.lattice = Lattice.from_mesh(self.grid.mesh)
@@ -270,9 +279,10 @@ class MPM(GodunovScheme):
 
     @stage
     def particle_update(self, s):
-        """v_p += dt sum_i S_ip a_i (FLIP), x_p += dt sum_i S_ip v_i*."""
+        """v_p += dt sum_i S_ip a_i (FLIP), x_p += dt sum_i S_ip v_i* (not in a linearised geometry)."""
         s.v = s.v + s.dt * (s.shape.S @ s.a)
-        s.x = s.x + s.dt * (s.shape.S @ s.v_grid)
+        if self.geometry == "updated":
+            s.x = s.x + s.dt * (s.shape.S @ s.v_grid)
 
     @stage
     def reproject(self, s):

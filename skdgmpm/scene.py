@@ -33,7 +33,7 @@ SCHEMA = {
     "bc": None,
     "method": {"name": str, "integrator": str, "transverse": str, "cfl": NUMBER, "order": int,
                "mls_order": int, "backmap": str, "limiter": str, "update": str, "shape": str,
-               "time_step": str, "cfl_above_limit": bool, "cfl_guard": str},
+               "time_step": str, "cfl_above_limit": bool, "cfl_guard": str, "geometry": str},
     "run": {"t_end": NUMBER, "frames": int, "checkpoint_every": (int, str), "step_limit": int, "threads": int,
             "energy_every": int},
     "exact": None,
