@@ -26,8 +26,9 @@ def _cmd_run(args):
     else:
         if args.case is None:
             raise InputError("run: give a scene (a name from 'skdgmpm list' or a .toml path), or --resume DIR")
-        out = args.out if args.out is not None else f"runs/{_stem(args.case)}"
-        result = run(args.case, overrides=args.set, out=out, force=args.force, progress=not args.quiet)
+        out = _out_dir(args, f"runs/{_stem(args.case)}", check=False)
+        result = run(args.case, overrides=args.set, out=out, force=args.force and args.out is not None,
+                     progress=not args.quiet)
     summary = result.summary()
     print(f"{summary['case']}: {summary['status']}, {summary['steps']} steps to t = "
           f"{summary['t_final']:.6g} s in {summary['wall_s']:.2f} s (+ {summary['startup_s']:.2f} s start-up) "
@@ -140,11 +141,17 @@ def _cmd_bench(args):
     return 0
 
 
-def _out_dir(args, default):
+def _out_dir(args, default, check=True):
+    """``--out`` if given (refused if not empty, unless --force), else the first free one of
+    ``default``, ``default-2``, ``default-3``, ... (`outdir.numbered`: --force replaces nothing)."""
     from pathlib import Path
 
-    out = Path(args.out if args.out is not None else default)
-    if out.exists() and any(out.iterdir()) and not args.force:
+    from .outdir import numbered
+
+    if args.out is None:
+        return numbered(default)
+    out = Path(args.out)
+    if check and out.exists() and any(out.iterdir()) and not args.force:
         raise InputError(f"--out {out}: directory exists and is not empty (use --force to replace it)")
     return out
 
@@ -183,8 +190,9 @@ def _cmd_compare_figures(args):
 
 def _output_options(p, default):
     """--out, --force and --quiet of the commands that write an output folder."""
-    p.add_argument("--out", default=None, help=f"output directory (default {default})")
-    p.add_argument("--force", action="store_true", help="replace an existing output directory")
+    p.add_argument("--out", default=None,
+                   help=f"output directory (default {default}, or {default}-2, -3, ...: the first that is free)")
+    p.add_argument("--force", action="store_true", help="replace the contents of an existing --out directory")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
