@@ -1,6 +1,6 @@
 """Exact solutions of the 1D bar problems of [R18 §7.1-7.2, App. A] and error norms.
 
-Both problems solve the 1D total-Lagrangian system (METHOD §1)
+Both problems solve the 1D total-Lagrangian system
 
     dF/dt - dv/dX = 0,        rho dv/dt - dP/dX = 0,
 
@@ -256,7 +256,7 @@ class ElastoplasticBarStep:
     Strain ``eps = diag(e, 0, 0)`` with ``e = F11 - 1`` (``F = diag(F11, 1, 1)``); isotropic
     linear elasticity (``lam, mu, K = lam + 2 mu / 3`` from ``E, nu``), von Mises yield
     ``q = sqrt(3/2 s:s) <= sigma_y + H eqp`` with linear isotropic hardening ``H >= 0`` and
-    associated flow, the law of METHOD §10. At rest for ``t < 0``; for ``t >= 0`` the left end
+    associated flow, the law of materials/j2_plasticity.py. At rest for ``t < 0``; for ``t >= 0`` the left end
     carries ``P11 = traction`` (negative: compression; at small strain ``P = sigma``). The
     solution below holds until the precursor reaches the far end, ``t_max = length / c_e``
     (whatever holds that end); later times raise an InputError.
