@@ -17,6 +17,7 @@ from .gimp import SHAPES
 from .mpm import MPM, UPDATES
 from .exact import INITIAL
 from .scene import exact_solution
+from .scene_keys import ignored_keys
 from .scheme import cell_values
 from .errors import InputError, InstabilityError
 from .grid import Grid, facets_in_box, line, load_mesh, rectangle
@@ -167,6 +168,8 @@ def build(scene):
         if choices is not None and key in method and method[key] not in choices:
             raise InputError(f"{scene.where(f'method.{key}')} = {method[key]!r}: expected one of "
                              f"{', '.join(choices)}")
+    for _, message in ignored_keys(scene):       # e.g. method.integrator in an ADER run: one line each
+        warnings.warn(message, stacklevel=2)
     mats = MaterialSet(tuple(materials))
     if name == "dgmpm":
         if method.get("order", 1) != 1:

@@ -81,7 +81,8 @@ class Result:
         method = s.data["method"]
         out = {
             "case": s.name, "title": s.get("title", ""), "method": method.get("name", "dgmpm"),
-            "order": int(getattr(st, "order", 1)), "integrator": st.integrator, "transverse": st.transverse,
+            "order": int(getattr(st, "order", 1)), "integrator": st.integrator,
+            "transverse": st.transverse if s.dim > 1 or method.get("name", "dgmpm") != "dgmpm" else "none",
             "cfl": st.cfl, "dim": s.dim, "cells": int(st.grid.submesh.nelements),
             "grid_cells": int(st.grid.mesh.nelements), "particles": len(self.disc.particles),
             "dofs": int(st.n_dofs_total), "steps": int(self.state.step),
