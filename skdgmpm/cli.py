@@ -1,4 +1,4 @@
-"""Command line: ``skdgmpm run | list | stability | converge | compare | bench | cfl-limit | compare-figures``."""
+"""Command line: ``skdgmpm run | list | scenes | stability | converge | compare | bench | cfl-limit | compare-figures``."""
 import argparse
 import json
 import sys
@@ -56,6 +56,21 @@ def _cmd_list(args):
     for name, path in list_scenes().items():
         scene = load_scene(path)
         print(f"{name:<28} {scene.dim}D  {scene.get('title', '')}  [{scene.get('reference', '')}]")
+    return 0
+
+
+def _cmd_scenes(args):
+    from . import scene_keys
+    from .scene import copy_scene, find_scene
+
+    if args.action == "show":
+        path = find_scene(args.name)
+        sys.stdout.write(f"# {path}\n" + path.read_text(encoding="utf-8"))
+    elif args.action == "copy":
+        written = copy_scene(args.name, args.dir, force=args.force)
+        print(f"copied {', '.join(str(p) for p in written)}\nrun it with: skdgmpm run {written[0]}")
+    else:
+        sys.stdout.write(scene_keys.markdown() if args.markdown else scene_keys.text() + "\n")
     return 0
 
 
@@ -279,6 +294,18 @@ def main(argv=None):
 
     p = sub.add_parser("list", help="list the scenes")
     p.set_defaults(func=_cmd_list)
+
+    p = sub.add_parser("scenes", help="show or copy a shipped scene, or print every scene key")
+    actions = p.add_subparsers(dest="action", required=True)
+    q = actions.add_parser("show", help="print a scene file (a name from 'skdgmpm list', or a path)")
+    q.add_argument("name")
+    q = actions.add_parser("copy", help="copy a scene with its mesh file into DIR, to start a scene of your own")
+    q.add_argument("name")
+    q.add_argument("dir")
+    q.add_argument("--force", action="store_true", help="overwrite files that exist in DIR")
+    q = actions.add_parser("schema", help="every scene key: type, unit, default, example, methods (docs/scenes.md)")
+    q.add_argument("--markdown", action="store_true", help="the Markdown of docs/scenes.md")
+    p.set_defaults(func=_cmd_scenes)
 
     p = sub.add_parser("stability", help="1D von Neumann analysis of a particle layout (R18 §6)")
     p.add_argument("--layout", required=True, help="parent coordinates in a cell, e.g. 0.25,0.75")

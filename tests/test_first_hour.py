@@ -7,6 +7,7 @@ the installed console script in a fresh, empty folder, twice: the second run mus
 first one's output folder, and neither may touch a folder that is not the tool's fresh default.
 """
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -65,3 +66,71 @@ def test_numbered_default(tmp_path):
         (tmp_path / "runs" / name).mkdir(parents=True)
         (tmp_path / "runs" / name / "f").write_text("")
     assert numbered(base) == tmp_path / "runs" / "s-3"
+
+
+# ------------------------------------------------------------------ skdgmpm scenes show | copy | schema
+
+def cli(capsys, *argv):
+    from skdgmpm.cli import main
+    rc = main([str(a) for a in argv])
+    captured = capsys.readouterr()
+    return rc, captured.out, captured.err
+
+
+def test_scenes_show_prints_the_scene(capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)                     # no ./cases: the installed package's scenes
+    rc, out, err = cli(capsys, "scenes", "show", "lasat_2d")
+    assert rc == 0 and err == ""
+    assert 'law = "gavrilyuk"' in out and 'mesh = "lasat_30.msh"' in out
+
+
+def test_scenes_copy_runs_from_its_folder_and_never_overwrites(capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    rc, out, _ = cli(capsys, "scenes", "copy", "partial_impact_2d", "mine")
+    assert rc == 0 and "skdgmpm run mine/partial_impact_2d.toml" in out
+    assert sorted(p.name for p in (tmp_path / "mine").iterdir()) == ["partial_impact_2d.toml", "plate_4x3.msh"]
+    (tmp_path / "mine" / "plate_4x3.msh").write_text("my own mesh")
+    rc, _, err = cli(capsys, "scenes", "copy", "partial_impact_2d", "mine")
+    assert rc == 2 and "exists already (use --force to overwrite)" in err and err.count("\n") == 1
+    assert (tmp_path / "mine" / "plate_4x3.msh").read_text() == "my own mesh"
+    rc, _, _ = cli(capsys, "scenes", "copy", "partial_impact_2d", "mine", "--force")
+    assert rc == 0 and (tmp_path / "mine" / "plate_4x3.msh").read_text() != "my own mesh"
+    rc, out, err = cli(capsys, "run", "mine/partial_impact_2d.toml", "--set", "run.t_end=1e-4", "--quiet")
+    assert rc == 0, err
+    assert "-> runs/partial_impact_2d" in out
+
+
+def test_scenes_schema_prints_every_key(capsys):
+    from skdgmpm.scene_keys import KEYS
+    rc, out, _ = cli(capsys, "scenes", "schema")
+    assert rc == 0
+    for key in KEYS:
+        assert f"\n{key.name}: " in "\n" + out, key.name
+
+
+def test_scenes_after_a_non_editable_install(tmp_path):
+    """`pip install .` (not -e) into a folder, then show / copy from a folder without ./cases:
+    the scenes and meshes are package data of skdgmpm.cases."""
+    root = Path(__file__).resolve().parents[1]
+    target = tmp_path / "site"
+    proc = subprocess.run([sys.executable, "-m", "pip", "install", str(root), "--no-deps", "--quiet",
+                           "--target", str(target)], capture_output=True, text=True, timeout=600)
+    if proc.returncode != 0:
+        pytest.skip(f"pip install . failed here (no build back-end from the index?): {proc.stderr[-300:]}")
+    work = tmp_path / "work"
+    work.mkdir()
+    env = {**os.environ, "PYTHONPATH": str(target)}
+
+    def skd(*argv):
+        return subprocess.run([sys.executable, "-m", "skdgmpm.cli", *argv], cwd=work, env=env,
+                              capture_output=True, text=True, timeout=600)
+
+    where = subprocess.run([sys.executable, "-c", "import skdgmpm; print(skdgmpm.__file__)"], cwd=work, env=env,
+                           capture_output=True, text=True)
+    assert where.stdout.startswith(str(target))
+    show = skd("scenes", "show", "bar_elastic_1d")
+    assert show.returncode == 0 and str(target) in show.stdout.splitlines()[0]
+    copy = skd("scenes", "copy", "lasat_2d", "mine")
+    assert copy.returncode == 0, copy.stderr
+    assert (work / "mine" / "lasat_30.msh").stat().st_size > 1000
+    assert skd("scenes", "schema").stdout.count("material.") >= 8
