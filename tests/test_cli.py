@@ -133,9 +133,10 @@ def test_stability(capsys):
     rc, out, err = cli(capsys, "stability", "--layout", "0.25,0.75")
     assert rc == 0 and err == ""
     table = {line.split()[0]: line.split()[1:] for line in out.splitlines()}
-    assert table["method"] == ["bound", "spectral"]
-    assert table["euler"][0] == "0.43"
-    assert table["rk2"][1] == "1.00"
+    assert table["method"] == ["CFL", "limit", "max-norm", "bound"]
+    assert table["euler"] == ["0.69", "0.43"]                 # Euler: CFL limit 0.69, bound 0.43
+    assert table["rk2"] == ["1.00", "0.75"]
+    assert "CFL limit: the von Neumann limit" in out
 
 
 def test_stability_json(capsys):
