@@ -12,6 +12,7 @@ EXIT_INPUT = 2           # bad input: one line naming file, key and value; nothi
 EXIT_UNSTABLE = 3        # a health stop: the last good state kept
 EXIT_OUTPUT = 74         # EX_IOERR: the outputs could not be written (full disk, ...); what was written kept
 EXIT_INTERRUPTED = 75    # EX_TEMPFAIL: stopped by SIGINT or SIGTERM after a checkpoint; --resume goes on
+EXIT_BROKEN_PIPE = 141   # 128 + SIGPIPE, as a tool the shell's pipe closed on: `skdgmpm list | head -1`
 
 
 def _cmd_run(args):
@@ -211,6 +212,16 @@ def _output_options(p, default):
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
+def _quiet_stdout():
+    """Point stdout at /dev/null, so that the interpreter's last flush of a closed pipe is silent."""
+    import os
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):                # no file descriptor (stdout replaced in Python)
+        pass
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="skdgmpm", description="DGMPM solver for impacts on solids")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -325,6 +336,9 @@ def main(argv=None):
         except OutputError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return EXIT_OUTPUT
+        except BrokenPipeError:             # `skdgmpm list | head -1`: the reader is gone, stop quietly
+            _quiet_stdout()
+            return EXIT_BROKEN_PIPE
         except KeyboardInterrupt:
             print("error: interrupted (before the first step, or a second Ctrl-C: no new checkpoint)",
                   file=sys.stderr)

@@ -383,7 +383,8 @@ def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, progress, 
 
 
 def _plots(result, folder, atomic=None):
-    """energy.png, profile.png and eqp.png (a law with plastic flow) into ``folder``; each written
+    """energy.png, profile.png (always; against the exact solution when there is one) and eqp.png
+    (a law with plastic flow) into ``folder``; each written
     through ``atomic(path, write)`` if given (`outdir.atomic_write`: never half a PNG)."""
     try:
         from . import plots
@@ -391,8 +392,7 @@ def _plots(result, folder, atomic=None):
         return
     atomic = atomic or (lambda path, write: write(path))
     atomic(folder / "energy.png", lambda p: plots.energy(result, p))
-    if result.scene.dim == 1 or result.exact is not None:
-        atomic(folder / "profile.png", lambda p: plots.profile(result, p))
+    atomic(folder / "profile.png", lambda p: plots.profile(result, p))     # with the exact solution if any
     if "eqp" in result.fields():                # a law with plastic flow: where it flowed
         if result.scene.dim == 1:
             atomic(folder / "eqp.png", lambda p: plots.profile(result, p, field="eqp"))
@@ -423,5 +423,7 @@ def progress_bar(enabled, total, **options):
 
 
 def _progress(total, name, enabled):
-    return progress_bar(enabled, total, desc=name, unit="s",
+    # delay: a run shorter than a second draws no bar, so leaves no cleared bar line (a blank line
+    # in a log or a notebook's `!skdgmpm run`) before its summary
+    return progress_bar(enabled, total, desc=name, unit="s", delay=1.0,
                         bar_format="{desc}: {percentage:3.0f}%|{bar}| t={n:.3g}/{total:.3g} s [{elapsed}<{remaining}]")

@@ -134,3 +134,24 @@ def test_scenes_after_a_non_editable_install(tmp_path):
     assert copy.returncode == 0, copy.stderr
     assert (work / "mine" / "lasat_30.msh").stat().st_size > 1000
     assert skd("scenes", "schema").stdout.count("material.") >= 8
+
+
+# ------------------------------------------------------------------ small stumbles of the first hour
+
+def test_list_into_head_exits_quietly(tmp_path):
+    proc = subprocess.run(f"'{skdgmpm()}' list | head -1", shell=True, cwd=tmp_path, capture_output=True,
+                          text=True, timeout=120)
+    assert proc.stdout.startswith("bar_elastic_1d") and proc.stdout.count("\n") == 1
+    assert proc.stderr == ""                      # no BrokenPipeError traceback
+
+
+def test_2d_run_without_exact_solution_writes_profile_and_no_blank_line(tmp_path):
+    proc = subprocess.run([skdgmpm(), "run", "partial_impact_2d", "--set", "run.t_end=1e-4"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith("partial_impact_2d: ok, ")
+    assert "\n\n" not in proc.stdout and not proc.stderr.startswith("\n")
+    out = tmp_path / "runs" / "partial_impact_2d"
+    assert (out / "profile.png").stat().st_size > 1000 and (out / "energy.png").is_file()
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["transverse"] == "ctu" and "errors" not in summary
