@@ -155,3 +155,43 @@ def test_2d_run_without_exact_solution_writes_profile_and_no_blank_line(tmp_path
     assert (out / "profile.png").stat().st_size > 1000 and (out / "energy.png").is_file()
     summary = json.loads((out / "summary.json").read_text())
     assert summary["transverse"] == "ctu" and "errors" not in summary
+
+
+def test_notebooks_extra_opens_jupyter_lab(tmp_path):
+    """`pip install ".[notebooks]"` brings JupyterLab (the README says to open the notebooks in it):
+    the extra lists it, and where it is installed (the test extra pulls it in) `jupyter lab`
+    starts a server that serves the notebooks' folder (--allow-root: CI runs as root)."""
+    import socket
+    import time
+    import tomllib
+    import urllib.request
+
+    root = Path(__file__).resolve().parents[1]
+    extra = tomllib.loads((root / "pyproject.toml").read_text())["project"]["optional-dependencies"]["notebooks"]
+    assert any(req.startswith("jupyterlab") for req in extra), extra
+    exe = shutil.which("jupyter-lab") or str(Path(sys.executable).with_name("jupyter-lab"))
+    if not Path(exe).exists():
+        pytest.skip("jupyterlab is not installed here")
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    env = {**os.environ, "JUPYTER_CONFIG_DIR": str(tmp_path / "cfg"), "JUPYTER_DATA_DIR": str(tmp_path / "data"),
+           "JUPYTER_RUNTIME_DIR": str(tmp_path / "rt")}
+    server = subprocess.Popen([exe, "--no-browser", "--allow-root", f"--port={port}", "--ip=127.0.0.1", "--IdentityProvider.token=",
+                               f"--ServerApp.root_dir={root / 'notebooks'}"], env=env, stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL)
+    opener = urllib.request.build_opener(urllib.request.ProxyHandler({}))     # localhost: no proxy
+    try:
+        deadline, body = time.time() + 90, ""
+        while time.time() < deadline and not body:
+            try:
+                with opener.open(f"http://127.0.0.1:{port}/api/contents", timeout=5) as reply:
+                    body = reply.read().decode()
+            except OSError:
+                time.sleep(0.5)
+        assert "01_quick_start.ipynb" in body
+        with opener.open(f"http://127.0.0.1:{port}/lab", timeout=10) as reply:
+            assert reply.status == 200 and "JupyterLab" in reply.read().decode()
+    finally:
+        server.terminate()
+        server.wait(timeout=30)
