@@ -35,8 +35,10 @@ def _cmd_run(args):
           f"{summary['t_final']:.6g} s in {summary['wall_s']:.2f} s (+ {summary['startup_s']:.2f} s start-up) "
           f"-> {out}")
     for name, norms in summary.get("errors", {}).items():
+        ref = norms.get("relative_to", name)
+        scale = "" if ref == name else " (absolute: exact 0)" if ref is None else f" (relative to {ref})"
         print(f"  {name:>6}: L1_rel {norms['L1_rel']:.3e}  L2_rel {norms['L2_rel']:.3e}  "
-              f"Linf {norms['Linf']:.3e}")
+              f"Linf {norms['Linf']:.3e}{scale}")
     if result.status == "interrupted":
         print(result.message, file=sys.stderr)
         return EXIT_INTERRUPTED

@@ -14,7 +14,7 @@ import numpy as np
 from . import checkpoint, guards, outdir, output
 from .build import build
 from .errors import InputError, InstabilityError, OutputError
-from .exact import error_norms
+from .exact import relative_errors
 from .kernel_cache import compile_notice
 from .scene import Scene, exact_solution, load_scene
 
@@ -148,8 +148,7 @@ def compute_errors(disc, state, solution):
         return {}
     fields = output.particle_fields(disc.stepper, state)
     exact = solution.fields(disc.particles.X, state.t)
-    return {k: error_norms(fields[k], exact[k], disc.particles.volume)
-            for k in exact if k in fields}
+    return relative_errors(fields, exact, disc.particles.volume)
 
 
 def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=None, max_steps=None,
