@@ -195,3 +195,19 @@ def test_notebooks_extra_opens_jupyter_lab(tmp_path):
     finally:
         server.terminate()
         server.wait(timeout=30)
+
+
+def test_profile_on_an_unstructured_mesh(tmp_path):
+    """One particle is lowest on an unstructured mesh: the profile runs along the horizontal line
+    through it, over the particles within half a spacing of it (it used to be a zero-length
+    segment: an error that stopped the run of notebook 03 once profile.png was always drawn)."""
+    import warnings
+    from skdgmpm.run import run
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")                  # grid.size/cells beside grid.mesh
+        r = run("plane_wave_svk_2d", ['grid.mesh="rectangle_2x05_unstructured.msh"', "run.t_end=2e-5"],
+                out=tmp_path / "o", progress=False)
+    assert r.status == "ok" and (tmp_path / "o" / "profile.png").stat().st_size > 1000
+    ax = r.plot_line("P11").figure.axes[0]
+    assert len(ax.lines[0].get_xdata()) >= 5
