@@ -23,13 +23,13 @@ def _cmd_run(args):
             raise InputError(f"--resume {args.resume}: give no scene, --set or --force: the run goes on with "
                              "the scene it started with")
         out = args.resume
-        result = run(resume=args.resume, out=args.out, progress=not args.quiet)
+        result = run(resume=args.resume, out=args.out, progress=not args.quiet, notice=True)
     else:
         if args.case is None:
             raise InputError("run: give a scene (a name from 'skdgmpm list' or a .toml path), or --resume DIR")
         out = _out_dir(args, f"runs/{_stem(args.case)}", check=False)
         result = run(args.case, overrides=args.set, out=out, force=args.force and args.out is not None,
-                     progress=not args.quiet)
+                     progress=not args.quiet, notice=True)     # --quiet: no bar, but say when it compiles
     summary = result.summary()
     print(f"{summary['case']}: {summary['status']}, {summary['steps']} steps to t = "
           f"{summary['t_final']:.6g} s in {summary['wall_s']:.2f} s (+ {summary['startup_s']:.2f} s start-up) "
@@ -211,7 +211,8 @@ def _output_options(p, default):
     p.add_argument("--out", default=None,
                    help=f"output directory (default {default}, or {default}-2, -3, ...: the first that is free)")
     p.add_argument("--force", action="store_true", help="replace the contents of an existing --out directory")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bar (a run still says, in one line, when it compiles its kernels)")
 
 
 def _quiet_stdout():

@@ -152,7 +152,7 @@ def compute_errors(disc, state, solution):
 
 
 def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=None, max_steps=None,
-        on_step=None, resume=None, signals=None):
+        on_step=None, resume=None, signals=None, notice=None):
     """Run ``scene`` (a `Scene`, a name or a path). Writes outputs to ``out`` if given.
     ``max_steps`` stops the run early (benchmarks); ``on_step(state, disc)`` is called with the initial
     state and after every step (error measures over the whole run, e.g. WG08's).
@@ -164,6 +164,7 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
     the main thread), on SIGINT or SIGTERM, after which the run returns with status "interrupted".
     ``resume=DIR`` continues the run checkpointed in DIR (no scene or overrides: the run goes on
     with the scene it started with), its outputs bit-identical to an uninterrupted run's.
+    ``notice`` (default: ``progress``): say on stderr, in one line, when the kernels compile.
     """
     saved = None
     if resume is not None:
@@ -196,7 +197,8 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
         out = Path(out)
         outdir.check(out, force, resume=saved is not None)
     begin = time.perf_counter()
-    notice = compile_notice(scene.get("method.name", "dgmpm"), scene.dim) if progress else nullcontext()
+    notice = (compile_notice(scene.get("method.name", "dgmpm"), scene.dim)
+              if (progress if notice is None else notice) else nullcontext())
     with notice:                          # a line on stderr if the kernels are not in the cache
         disc = build(scene)
     solution = exact_solution(scene)
@@ -219,9 +221,9 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
             folder.release()
 
 
-def resume(folder, progress=True, signals=None):
+def resume(folder, progress=True, signals=None, notice=None):
     """Continue the run checkpointed in ``folder`` (what ``skdgmpm run --resume DIR`` does)."""
-    return run(resume=folder, progress=progress, signals=signals)
+    return run(resume=folder, progress=progress, signals=signals, notice=notice)
 
 
 class _Signals:

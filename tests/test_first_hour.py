@@ -211,3 +211,20 @@ def test_profile_on_an_unstructured_mesh(tmp_path):
     assert r.status == "ok" and (tmp_path / "o" / "profile.png").stat().st_size > 1000
     ax = r.plot_line("P11").figure.axes[0]
     assert len(ax.lines[0].get_xdata()) >= 5
+
+
+def test_quiet_run_still_says_when_it_compiles(tmp_path, monkeypatch, capsys):
+    """--quiet drops the progress bar, not the one line that says the kernels compile (minutes
+    without a word otherwise on a cold cache); the API's progress=False stays silent."""
+    from contextlib import nullcontext
+
+    from skdgmpm import run as run_module
+    from skdgmpm.cli import main
+
+    asked = []
+    monkeypatch.setattr(run_module, "compile_notice", lambda method, d: asked.append((method, d)) or nullcontext())
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", "bar_elastic_1d", "--set", "run.t_end=1e-4", "--quiet"]) == 0
+    assert asked == [("dgmpm", 1)]
+    run_module.run("bar_elastic_1d", ["run.t_end=1e-4"], progress=False)
+    assert asked == [("dgmpm", 1)]
