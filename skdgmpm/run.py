@@ -177,6 +177,7 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
         saved = checkpoint.read(out)
         scene = Scene.from_dict(saved.scene_data, saved.scene_name,
                                 Path(saved.scene_path) if saved.scene_path else None)
+        scene.overridden = saved.scene_overridden
         n_frames = saved.n_frames
     elif scene is None:
         raise InputError("no scene given (a name from 'skdgmpm list' or a .toml path), nor --resume DIR")
