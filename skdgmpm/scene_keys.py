@@ -181,7 +181,7 @@ KEYS = (
         "mms_ring (E, nu, rho and the law are the scene's [material])", type="string"),
     Key("exact.load", "", "none", '"left"',
         "the [bc.NAME] of kind traction or free whose value drives a bar solution", type="string", dims=(1,)),
-    Key("exact.traction", "Pa", "from load", "-1.0e9", "bar solutions: the load, if not given by load",
+    Key("exact.traction", "Pa", "from load", "-1.0e9", "bar solutions: P11 at the loaded end (negative: compression), if not given by load",
         type="number", dims=(1,)),
     Key("exact.length", "m", "grid.length", "6.0", "bar solutions: the bar's length (reflections)",
         type="number", dims=(1,)),
