@@ -335,15 +335,17 @@ def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, progress, 
                     if warm is None:
                         bar.unpause()             # the first step compiles: its time is not in the rate
                     step_guard.check(state, new, t_end)
-                    bar.update(new.t - state.t)
-                    state = new
-                    frame_due = state.t >= next_frame * t_end / max(n_frames, 1) * (1 - 1e-12)
+                    frame_due = new.t >= next_frame * t_end / max(n_frames, 1) * (1 - 1e-12)
                     # a row of energy.csv (and the balance's check) on steps fixed by the scene alone,
                     # so that a resumed run writes the rows an uninterrupted one does
-                    if (state.step % energy_every == 0 or frame_due or state.t >= t_end * (1 - 1e-12)
-                            or state.step == max_steps):
-                        energies = stepper.energy(state)
-                        energy_guard.check(state, sum(energies), stepper.external_work)
+                    energies = None
+                    if (new.step % energy_every == 0 or frame_due or new.t >= t_end * (1 - 1e-12)
+                            or new.step == max_steps):
+                        energies = stepper.energy(new)
+                        energy_guard.check(new, sum(energies), stepper.external_work)
+                    bar.update(new.t - state.t)
+                    state = new
+                    if energies is not None:
                         record(state, energies)
                     if on_step is not None:
                         on_step(state, disc)
