@@ -146,7 +146,7 @@ def _cmd_compare(args):
 
 
 def _cmd_bench(args):
-    from . import bench, parallel, study
+    from . import bench, parallel, peer, study
 
     methods = [m for m in args.methods.split(",") if m] if args.methods != "all" else list(bench.METHODS)
     sizes = study._int_list(args.sizes, "--sizes")
@@ -161,6 +161,9 @@ def _cmd_bench(args):
     scaling = bench.format_scaling(rows)
     if scaling:
         print("\nthreads (wall time per step, speed-up over one thread):\n" + scaling)
+    ratio = peer.format_ratio(rows)
+    if ratio:
+        print("\nours / peer (CPU time per cell and step, one core):\n" + ratio)
     return 0
 
 
@@ -281,7 +284,8 @@ def main(argv=None):
     p = sub.add_parser("bench", help="benchmark every method on a 2D neo-Hookean impact (set-up, "
                                      "time per step/cell/dof, memory)")
     p.add_argument("--methods", default="dgmpm-ctu,dgmpm-dcu,ader-dgmpm-1,ader-dgfem-1,rk-dgfem-1",
-                   help="comma-separated benchmark names, or 'all' (see skdgmpm.bench.METHODS)")
+                   help="comma-separated benchmark names, or 'all' (see skdgmpm.bench.METHODS); the peer "
+                        "Clawpack/PyClaw rows are named apart: pyclaw-ctu, pyclaw-ctu-2 (skdgmpm.peer)")
     p.add_argument("--sizes", default="64,128", help="cells per side")
     p.add_argument("--steps", type=int, default=5, help="timed steps (median)")
     p.add_argument("--warmup", type=int, default=2, help="untimed steps first")
