@@ -13,7 +13,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .equations import _solve
 from .errors import InputError
+from .kernel_cache import kernel_factory, scratch
 
 AXES = "xyz"
 
@@ -47,19 +49,37 @@ def star_state(frame, imposes_velocity, values, t_L, v_L, Z):
     ``e_k . v* = values[k]`` if ``imposes_velocity[k]`` else ``e_k . t* = values[k]``.
 
     frame (nf, d, d), imposes_velocity (d,) bool, values (nf, d) or (d,), states (nf, d), Z (nf, d, d).
+    One compiled pass over the faces (a 2d x 2d system each, `equations._solve`).
     """
     nf, d = v_L.shape
-    A = np.zeros((nf, 2 * d, 2 * d))
-    b = np.zeros((nf, 2 * d))
-    A[:, :d, :d] = np.eye(d)                        # unknowns x = [t*, v*]
-    A[:, :d, d:] = -Z
-    b[:, :d] = t_L - np.einsum("fij,fj->fi", Z, v_L)
-    sel = np.where(np.asarray(imposes_velocity)[None, :, None], 0, 1)
-    A[:, d:, :d] = frame * (sel == 1)
-    A[:, d:, d:] = frame * (sel == 0)
-    b[:, d:] = values
-    x = np.linalg.solve(A, b[..., None])[..., 0]
-    return x[:, :d], x[:, d:]
+    t_s, v_s = np.empty((nf, d)), np.empty((nf, d))
+    if nf:
+        _star_states(d)(np.ascontiguousarray(frame, dtype=float),
+                        np.asarray(imposes_velocity, dtype=np.bool_).reshape(d),
+                        np.ascontiguousarray(np.broadcast_to(values, (nf, d)), dtype=float),
+                        t_L, v_L, Z, t_s, v_s)
+    return t_s, v_s
+
+
+@kernel_factory
+def _star_states(d):                    # a literal d: the 2d x 2d system unrolled
+    def star_states(frame, velocity, values, t_L, v_L, Z, t_s, v_s):
+        A, b, x = scratch((2 * d, 2 * d)), scratch((2 * d,)), scratch((2 * d,))
+        for f in range(len(t_L)):
+            for i in range(d):          # unknowns x = [t*, v*]
+                zv = 0.0
+                for j in range(d):
+                    A[i, j] = 1.0 if i == j else 0.0
+                    A[i, d + j] = -Z[f, i, j]
+                    zv += Z[f, i, j] * v_L[f, j]
+                    A[d + i, j] = 0.0 if velocity[i] else frame[f, i, j]
+                    A[d + i, d + j] = frame[f, i, j] if velocity[i] else 0.0
+                b[i] = t_L[f, i] - zv
+                b[d + i] = values[f, i]
+            _solve(A, b, x, 2 * d)
+            for i in range(d):
+                t_s[f, i], v_s[f, i] = x[i], x[d + i]
+    return star_states
 
 
 @dataclass(frozen=True)

@@ -55,7 +55,7 @@ def set_threads(n):
     if n is not None and (not isinstance(n, int) or isinstance(n, bool) or n < 1):
         raise ValueError(f"threads = {n!r}: expected a whole number >= 1")
     previous, _threads = _threads, n
-    if _pool is not None and _pool._max_workers != threads():
+    if _pool is not None and _pool._max_workers != threads() - 1:
         _pool.shutdown()
         _pool = None
     return previous
@@ -74,9 +74,11 @@ def rows(n, call):
         return [call(0, n)]
     global _pool
     if _pool is None:
-        _pool = ThreadPoolExecutor(max_workers=threads(), thread_name_prefix="skdgmpm")
-    futures = [_pool.submit(call, lo, hi) for lo, hi in bounds(n, parts)]
-    return [f.result() for f in futures]
+        _pool = ThreadPoolExecutor(max_workers=threads() - 1, thread_name_prefix="skdgmpm")
+    chunks = bounds(n, parts)
+    futures = [_pool.submit(call, lo, hi) for lo, hi in chunks[1:]]
+    first = call(*chunks[0])            # the calling thread takes the first chunk itself
+    return [first] + [f.result() for f in futures]
 
 
 def first_bad(n, call):
