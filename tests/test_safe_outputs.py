@@ -63,9 +63,9 @@ def test_frames_go_to_a_hidden_name_then_are_renamed(tmp_path, monkeypatch):
     written = []
     real = output.write_particles
 
-    def spy(path, stepper, state):
+    def spy(path, stepper, state, *fields):
         written.append(Path(path))
-        real(path, stepper, state)
+        real(path, stepper, state, *fields)
 
     monkeypatch.setattr(output, "write_particles", spy)
     out = tmp_path / "out"
