@@ -24,6 +24,7 @@ import resource
 import statistics
 import time
 
+from . import peer
 from .errors import InputError
 from .integrators import EVALUATIONS
 from .study import L23_LAYOUT
@@ -54,6 +55,8 @@ METHODS["ader-dgmpm-1-j2"] = [*METHODS["ader-dgmpm-1"], *J2]
 
 def _measure(method, n, steps, warmup, threads=1):
     """One benchmark in this process, its passes on ``threads`` threads: returns a row (dict)."""
+    if method in peer.METHODS:          # Clawpack/PyClaw on the same plate (serial): skdgmpm.peer
+        return peer.measure_here(method, n, steps, warmup)
     from . import parallel
     from .build import build
     from .scene import load_scene
@@ -105,8 +108,10 @@ def _child(queue, *args):
 
 def measure(method, n, steps=5, warmup=2, threads=1):
     """Run one benchmark in a fresh process (spawned, so its peak memory is its own)."""
-    if method not in METHODS:
-        raise InputError(f"--methods: {method!r} is not a benchmark (known: {', '.join(METHODS)})")
+    if method not in METHODS and method not in peer.METHODS:
+        raise InputError(f"--methods: {method!r} is not a benchmark (known: {', '.join([*METHODS, *peer.METHODS])})")
+    if method in peer.METHODS and not peer.available():
+        return peer.missing_row(method, n)
     ctx = multiprocessing.get_context("spawn")
     queue = ctx.Queue()
     proc = ctx.Process(target=_child, args=(queue, method, n, steps, warmup, threads))
@@ -130,7 +135,8 @@ def format_table(rows):
     lines = [head, "-" * len(head)]
     for r in rows:
         if "error" in r:
-            lines.append(f"{r['method']:<16}{r['cells']:>8}{r.get('threads', 1):>4}  failed: {r['error']}")
+            lines.append(f"{r['method']:<16}{r['cells']:>8}{r.get('threads', 1):>4}  "
+                         f"{'skipped' if r.get('missing') else 'failed'}: {r['error']}")
             continue
         lines.append(f"{r['method']:<16}{r['cells']:>8}{r.get('threads', 1):>4}{r['setup_s']:>9.2f}{1e3 * r['step_s']:>10.2f}"
                      f"{r['us_per_cell_step']:>9.2f}{1e9 * r['s_per_dof_step']:>8.0f}"
@@ -176,9 +182,12 @@ def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threa
 
     rows = []
     bar = progress_bar(progress, len(methods) * len(sizes) * len(threads), unit="run")
-    for method in methods:
-        for n in sizes:
+    for n in sizes:                     # methods interleaved at each size (a peer beside ours)
+        for method in methods:
             for t in threads:
+                if method in peer.METHODS and t != threads[0]:     # serial: one row
+                    bar.update()
+                    continue
                 bar.set_description(f"{method} {n}x{n} {t} thread{'s' if t > 1 else ''}")
                 rows.append(measure(method, n, steps, warmup, t))
                 bar.update()

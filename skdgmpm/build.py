@@ -17,6 +17,7 @@ from .gimp import SHAPES
 from .mpm import MPM, UPDATES
 from .exact import INITIAL
 from .scene import exact_solution
+from .scene_keys import ignored_keys
 from .scheme import cell_values
 from .errors import InputError, InstabilityError
 from .grid import Grid, facets_in_box, line, load_mesh, rectangle
@@ -124,13 +125,11 @@ def build(scene):
     mesh = build_mesh(scene)
     materials = [_material(scene, scene.data["material"], "material")]
     regions = scene.get("regions") or []
+    if not isinstance(regions, list):
+        raise InputError(f"{scene.where('regions')} = {regions!r} must be a list of tables ([[regions]])")
+    region_cells = [_region_cells(scene, mesh, k, region) for k, region in enumerate(regions)]
     for k, region in enumerate(regions):
-        where = f"regions[{k}]"
-        if not (isinstance(region, dict) and isinstance(region.get("box"), dict)
-                and isinstance(region.get("material"), dict) and set(region) <= {"box", "material"}):
-            raise InputError(f"{scene.where(where)} = {region!r} must be a table with box and material")
-        _check_box(scene, f"{where}.box", region["box"], d)
-        materials.append(_material(scene, region["material"], f"{where}.material"))
+        materials.append(_material(scene, region["material"], f"regions[{k}].material"))
 
     pspec = scene.get("particles") or {}
     if "file" in pspec:
@@ -146,16 +145,10 @@ def build(scene):
         X, xi, cell, volume = fill_cells(grid.submesh, np.arange(grid.submesh.nelements), layout,
                                          grid.cell_volumes())
     n = len(X)
-    # material of a particle: the last region containing its cell's centre, else the default
-    centre = grid.submesh.p[:, grid.submesh.t].mean(axis=1)[:, cell]
+    # material of a particle: the last region holding its cell, else the default
     which = np.zeros(n, dtype=np.int64)
-    for k, region in enumerate(regions):
-        inside = np.ones(n, dtype=bool)
-        for axis, key in enumerate("xy"[:d]):
-            if key in region["box"]:
-                lo, hi = region["box"][key]
-                inside &= (centre[axis] >= lo) & (centre[axis] <= hi)
-        which[inside] = k + 1
+    for k, in_region in enumerate(region_cells):
+        which[in_region[grid.active[cell]]] = k + 1
     rho0 = np.array([m.rho for m in materials])[which]
     particles = Particles(X, xi, cell, volume, rho0, which)
 
@@ -175,6 +168,8 @@ def build(scene):
         if choices is not None and key in method and method[key] not in choices:
             raise InputError(f"{scene.where(f'method.{key}')} = {method[key]!r}: expected one of "
                              f"{', '.join(choices)}")
+    for _, message in ignored_keys(scene):       # e.g. method.integrator in an ADER run: one line each
+        warnings.warn(message, stacklevel=2)
     mats = MaterialSet(tuple(materials))
     if name == "dgmpm":
         if method.get("order", 1) != 1:
@@ -256,6 +251,35 @@ def build(scene):
                          f"({str(exc).split(' at step')[0]})") from None
     return Discretisation(scene, grid, stepper.particles, layout if name == "dgmpm" else None,
                           stepper, initial)
+
+
+def _region_cells(scene, mesh, k, region):
+    """Mask over the cells of ``mesh`` of ``[[regions]]`` number k: the cells whose centre lies in
+    its ``box``, or those of its ``subdomain`` (a gmsh physical surface, as ``body.subdomain``)."""
+    where = f"regions[{k}]"
+    if not (isinstance(region, dict) and isinstance(region.get("material"), dict)
+            and set(region) <= {"box", "subdomain", "material"} and ("box" in region) != ("subdomain" in region)):
+        raise InputError(f"{scene.where(where)} = {region!r} must be a table with material and one of "
+                         f"box = {{x = [lo, hi], ...}} or subdomain = \"NAME\" (a physical surface of the mesh)")
+    if "subdomain" in region:
+        name, subs = region["subdomain"], mesh.subdomains or {}
+        if not isinstance(name, str) or name not in subs:
+            known = ", ".join(subs) if subs else "none: a generated grid has none, a gmsh file's physical surfaces"
+            raise InputError(f"{scene.where(f'{where}.subdomain')} = {name!r} is not a physical surface of the "
+                             f"mesh (known: {known})")
+        inside = np.zeros(mesh.nelements, dtype=bool)
+        inside[np.asarray(subs[name])] = True
+        return inside
+    if not isinstance(region["box"], dict):
+        raise InputError(f"{scene.where(f'{where}.box')} = {region['box']!r} must be a table {{x = [lo, hi], ...}}")
+    _check_box(scene, f"{where}.box", region["box"], mesh.dim())
+    centre = mesh.p[:, mesh.t].mean(axis=1)
+    inside = np.ones(mesh.nelements, dtype=bool)
+    for axis, key in enumerate("xy"[: mesh.dim()]):
+        if key in region["box"]:
+            lo, hi = region["box"][key]
+            inside &= (centre[axis] >= lo) & (centre[axis] <= hi)
+    return inside
 
 
 def _read_points(scene, name, d):

@@ -108,6 +108,7 @@ class Checkpoint:
     wall_s: float
     startup_s: float
     dt0: float
+    scene_overridden: tuple = ()  # the keys --set gave (messages, and the ignored-key warnings)
     probes: np.ndarray = None     # (rows, columns) of the probes (`skdgmpm.probes.Probes.table`)
 
 
@@ -125,7 +126,8 @@ def write(folder, scene, state, stepper, history, entries, next_frame, n_frames,
         arrays["probes"] = probes.table()
     meta = {
         "format": FORMAT, "t": state.t, "step": int(state.step), "health": state.health,
-        "scene": {"name": scene.name, "data": scene.data, "path": str(Path(scene.path).resolve()) if scene.path else None},
+        "scene": {"name": scene.name, "data": scene.data, "path": str(Path(scene.path).resolve()) if scene.path else None,
+                  "overridden": list(scene.overridden)},
         "stepper": stepper_state(stepper), "history_keys": list(history),
         "entries": [[float(t), name, int(step)] for t, name, step in entries], "next_frame": int(next_frame),
         "n_frames": int(n_frames), "wall_s": float(wall_s), "startup_s": float(startup_s),
@@ -164,4 +166,5 @@ def read(folder):
     s = meta["scene"]
     return Checkpoint(s["name"], s["data"], s["path"], state, meta["stepper"], history,
                       [(t, name, step) for t, name, step in meta["entries"]], meta["next_frame"],
-                      meta["n_frames"], meta["wall_s"], meta["startup_s"], meta["dt0"], arrays.get("probes"))
+                      meta["n_frames"], meta["wall_s"], meta["startup_s"], meta["dt0"],
+                      tuple(s.get("overridden", ())), arrays.get("probes"))

@@ -1,4 +1,4 @@
-"""Command line: ``skdgmpm run | list | stability | converge | compare | bench | cfl-limit | compare-figures``."""
+"""Command line: ``skdgmpm run | list | scenes | stability | converge | compare | bench | cfl-limit | compare-figures``."""
 import argparse
 import json
 import sys
@@ -12,6 +12,7 @@ EXIT_INPUT = 2           # bad input: one line naming file, key and value; nothi
 EXIT_UNSTABLE = 3        # a health stop: the last good state kept
 EXIT_OUTPUT = 74         # EX_IOERR: the outputs could not be written (full disk, ...); what was written kept
 EXIT_INTERRUPTED = 75    # EX_TEMPFAIL: stopped by SIGINT or SIGTERM after a checkpoint; --resume goes on
+EXIT_BROKEN_PIPE = 141   # 128 + SIGPIPE, as a tool the shell's pipe closed on: `skdgmpm list | head -1`
 
 
 def _cmd_run(args):
@@ -27,19 +28,22 @@ def _cmd_run(args):
             raise InputError(f"--resume {args.resume}: give no scene, --set or --force: the run goes on with "
                              "the scene it started with")
         out = args.resume
-        result = run(resume=args.resume, out=args.out, progress=not args.quiet)
+        result = run(resume=args.resume, out=args.out, progress=not args.quiet, notice=True)
     else:
         if args.case is None:
             raise InputError("run: give a scene (a name from 'skdgmpm list' or a .toml path), or --resume DIR")
-        out = args.out if args.out is not None else f"runs/{_stem(args.case)}"
-        result = run(args.case, overrides=args.set, out=out, force=args.force, progress=not args.quiet)
+        out = _out_dir(args, f"runs/{_stem(args.case)}", check=False)
+        result = run(args.case, overrides=args.set, out=out, force=args.force and args.out is not None,
+                     progress=not args.quiet, notice=True)     # --quiet: no bar, but say when it compiles
     summary = result.summary()
     print(f"{summary['case']}: {summary['status']}, {summary['steps']} steps to t = "
           f"{summary['t_final']:.6g} s in {summary['wall_s']:.2f} s (+ {summary['startup_s']:.2f} s start-up) "
           f"-> {out}")
     for name, norms in summary.get("errors", {}).items():
+        ref = norms.get("relative_to", name)
+        scale = "" if ref == name else " (absolute: exact 0)" if ref is None else f" (relative to {ref})"
         print(f"  {name:>6}: L1_rel {norms['L1_rel']:.3e}  L2_rel {norms['L2_rel']:.3e}  "
-              f"Linf {norms['Linf']:.3e}")
+              f"Linf {norms['Linf']:.3e}{scale}")
     if result.status == "interrupted":
         print(result.message, file=sys.stderr)
         return EXIT_INTERRUPTED
@@ -60,6 +64,21 @@ def _cmd_list(args):
     for name, path in list_scenes().items():
         scene = load_scene(path)
         print(f"{name:<28} {scene.dim}D  {scene.get('title', '')}  [{scene.get('reference', '')}]")
+    return 0
+
+
+def _cmd_scenes(args):
+    from . import scene_keys
+    from .scene import copy_scene, find_scene
+
+    if args.action == "show":
+        path = find_scene(args.name)
+        sys.stdout.write(f"# {path}\n" + path.read_text(encoding="utf-8"))
+    elif args.action == "copy":
+        written = copy_scene(args.name, args.dir, force=args.force)
+        print(f"copied {', '.join(str(p) for p in written)}\nrun it with: skdgmpm run {written[0]}")
+    else:
+        sys.stdout.write(scene_keys.markdown() if args.markdown else scene_keys.text() + "\n")
     return 0
 
 
@@ -127,7 +146,7 @@ def _cmd_compare(args):
 
 
 def _cmd_bench(args):
-    from . import bench, parallel, study
+    from . import bench, parallel, peer, study
 
     methods = [m for m in args.methods.split(",") if m] if args.methods != "all" else list(bench.METHODS)
     sizes = study._int_list(args.sizes, "--sizes")
@@ -142,14 +161,23 @@ def _cmd_bench(args):
     scaling = bench.format_scaling(rows)
     if scaling:
         print("\nthreads (wall time per step, speed-up over one thread):\n" + scaling)
+    ratio = peer.format_ratio(rows)
+    if ratio:
+        print("\nours / peer (CPU time per cell and step, one core):\n" + ratio)
     return 0
 
 
-def _out_dir(args, default):
+def _out_dir(args, default, check=True):
+    """``--out`` if given (refused if not empty, unless --force), else the first free one of
+    ``default``, ``default-2``, ``default-3``, ... (`outdir.numbered`: --force replaces nothing)."""
     from pathlib import Path
 
-    out = Path(args.out if args.out is not None else default)
-    if out.exists() and any(out.iterdir()) and not args.force:
+    from .outdir import numbered
+
+    if args.out is None:
+        return numbered(default)
+    out = Path(args.out)
+    if check and out.exists() and any(out.iterdir()) and not args.force:
         raise InputError(f"--out {out}: directory exists and is not empty (use --force to replace it)")
     return out
 
@@ -188,9 +216,21 @@ def _cmd_compare_figures(args):
 
 def _output_options(p, default):
     """--out, --force and --quiet of the commands that write an output folder."""
-    p.add_argument("--out", default=None, help=f"output directory (default {default})")
-    p.add_argument("--force", action="store_true", help="replace an existing output directory")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--out", default=None,
+                   help=f"output directory (default {default}, or {default}-2, -3, ...: the first that is free)")
+    p.add_argument("--force", action="store_true", help="replace the contents of an existing --out directory")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bar (a run still says, in one line, when it compiles its kernels)")
+
+
+def _quiet_stdout():
+    """Point stdout at /dev/null, so that the interpreter's last flush of a closed pipe is silent."""
+    import os
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):                # no file descriptor (stdout replaced in Python)
+        pass
 
 
 def main(argv=None):
@@ -244,7 +284,8 @@ def main(argv=None):
     p = sub.add_parser("bench", help="benchmark every method on a 2D neo-Hookean impact (set-up, "
                                      "time per step/cell/dof, memory)")
     p.add_argument("--methods", default="dgmpm-ctu,dgmpm-dcu,ader-dgmpm-1,ader-dgfem-1,rk-dgfem-1",
-                   help="comma-separated benchmark names, or 'all' (see skdgmpm.bench.METHODS)")
+                   help="comma-separated benchmark names, or 'all' (see skdgmpm.bench.METHODS); the peer "
+                        "Clawpack/PyClaw rows are named apart: pyclaw-ctu, pyclaw-ctu-2 (skdgmpm.peer)")
     p.add_argument("--sizes", default="64,128", help="cells per side")
     p.add_argument("--steps", type=int, default=5, help="timed steps (median)")
     p.add_argument("--warmup", type=int, default=2, help="untimed steps first")
@@ -280,6 +321,18 @@ def main(argv=None):
     p = sub.add_parser("list", help="list the scenes")
     p.set_defaults(func=_cmd_list)
 
+    p = sub.add_parser("scenes", help="show or copy a shipped scene, or print every scene key")
+    actions = p.add_subparsers(dest="action", required=True)
+    q = actions.add_parser("show", help="print a scene file (a name from 'skdgmpm list', or a path)")
+    q.add_argument("name")
+    q = actions.add_parser("copy", help="copy a scene with its mesh file into DIR, to start a scene of your own")
+    q.add_argument("name")
+    q.add_argument("dir")
+    q.add_argument("--force", action="store_true", help="overwrite files that exist in DIR")
+    q = actions.add_parser("schema", help="every scene key: type, unit, default, example, methods (docs/scenes.md)")
+    q.add_argument("--markdown", action="store_true", help="the Markdown of docs/scenes.md")
+    p.set_defaults(func=_cmd_scenes)
+
     p = sub.add_parser("stability", help="1D von Neumann analysis of a particle layout (R18 §6)")
     p.add_argument("--layout", required=True, help="parent coordinates in a cell, e.g. 0.25,0.75")
     p.add_argument("--json", action="store_true", help="also print the report as JSON")
@@ -298,6 +351,9 @@ def main(argv=None):
         except OutputError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return EXIT_OUTPUT
+        except BrokenPipeError:             # `skdgmpm list | head -1`: the reader is gone, stop quietly
+            _quiet_stdout()
+            return EXIT_BROKEN_PIPE
         except KeyboardInterrupt:
             print("error: interrupted (before the first step, or a second Ctrl-C: no new checkpoint)",
                   file=sys.stderr)

@@ -1,6 +1,6 @@
 """Exact solutions of the 1D bar problems of [R18 §7.1-7.2, App. A] and error norms.
 
-Both problems solve the 1D total-Lagrangian system (METHOD §1)
+Both problems solve the 1D total-Lagrangian system
 
     dF/dt - dv/dX = 0,        rho dv/dt - dP/dX = 0,
 
@@ -23,7 +23,8 @@ from scipy.optimize import brentq
 from skdgmpm.errors import InputError
 from skdgmpm.manufactured import MANUFACTURED
 
-__all__ = ["EXACT", "ElasticBarStep", "ElastoplasticBarStep", "SVKBarRiemann", "error_norms", "make_exact"]
+__all__ = ["EXACT", "ElasticBarStep", "ElastoplasticBarStep", "SVKBarRiemann", "error_norms", "make_exact",
+           "relative_errors"]
 
 
 def _check(cls, key, value, ok, what):
@@ -256,7 +257,7 @@ class ElastoplasticBarStep:
     Strain ``eps = diag(e, 0, 0)`` with ``e = F11 - 1`` (``F = diag(F11, 1, 1)``); isotropic
     linear elasticity (``lam, mu, K = lam + 2 mu / 3`` from ``E, nu``), von Mises yield
     ``q = sqrt(3/2 s:s) <= sigma_y + H eqp`` with linear isotropic hardening ``H >= 0`` and
-    associated flow, the law of METHOD §10. At rest for ``t < 0``; for ``t >= 0`` the left end
+    associated flow, the law of materials/j2_plasticity.py. At rest for ``t < 0``; for ``t >= 0`` the left end
     carries ``P11 = traction`` (negative: compression; at small strain ``P = sigma``). The
     solution below holds until the precursor reaches the far end, ``t_max = length / c_e``
     (whatever holds that end); later times raise an InputError.
@@ -501,13 +502,15 @@ def make_exact(name, **params):
     return cls(**params)
 
 
-def error_norms(numerical, exact, weights):
+def error_norms(numerical, exact, weights, scale=None):
     """Weighted error norms of a 1-D field (e.g. weights = particle volumes).
 
-    ``L1_rel = sum w |e| / sum w |u|``, ``L2_rel = sqrt(sum w e^2 / sum w u^2)`` with
-    ``e = numerical - exact`` and ``u = exact``; ``Linf = max |e|`` (absolute). When the exact
-    field is identically zero (zero denominators) ``L1_rel`` and ``L2_rel`` hold the absolute
-    norms ``sum w |e|`` and ``sqrt(sum w e^2)`` instead.
+    ``L1_rel = sum w |e| / S1``, ``L2_rel = sqrt(sum w e^2) / S2`` with ``e = numerical - exact``
+    and ``(S1, S2) = scale``, by default the norms of the exact field itself,
+    ``S1 = sum w |u|``, ``S2 = sqrt(sum w u^2)``; ``Linf = max |e|`` (absolute). When a
+    denominator is zero (an identically zero exact field, and no scale), ``L1_rel`` and
+    ``L2_rel`` hold the absolute norms ``sum w |e|`` and ``sqrt(sum w e^2)`` instead.
+    `relative_errors` gives each field the scale of its kind.
 
     Returns
     -------
@@ -521,9 +524,48 @@ def error_norms(numerical, exact, weights):
     if np.any(w < 0):
         raise InputError("error_norms: bad value for 'weights': negative entries")
     e = np.abs(a - b)
-    d1, d2 = np.sum(w * np.abs(b)), np.sum(w * b * b)
+    d1, d2 = _norms(b, w) if scale is None else scale
     return {
         "L1_rel": float(np.sum(w * e) / (d1 if d1 > 0 else 1.0)),
-        "L2_rel": float(np.sqrt(np.sum(w * e * e) / (d2 if d2 > 0 else 1.0))),
+        "L2_rel": float(np.sqrt(np.sum(w * e * e)) / (d2 if d2 > 0 else 1.0)),
         "Linf": float(e.max(initial=0.0)),
     }
+
+
+def _norms(u, w):
+    return float(np.sum(w * np.abs(u))), float(np.sqrt(np.sum(w * u * u)))
+
+
+def field_kind(name):
+    """P12 -> P, v1 -> v, sigma11 -> sigma, eqp -> eqp: the quantity a component belongs to."""
+    return name.rstrip("0123456789") or name
+
+
+def relative_errors(numerical, exact, weights):
+    """Error norms of every field of ``exact`` found in ``numerical`` (dicts of 1-D arrays), each
+    relative to the scale of its kind: the norms of the exact component of largest L2 norm among
+    those of the same quantity (P11, P12, P21, P22 -> the largest of them), so that a component whose
+    exact value is near zero (P12 of a plane wave) is measured against the field's scale, not
+    against its own near-zero norm. ``relative_to`` names that component (the field itself when it
+    is the largest; None when the whole quantity is zero: the norms are then absolute).
+
+    Returns
+    -------
+    dict
+        ``{field: {"L1_rel", "L2_rel", "Linf", "relative_to"}}``.
+    """
+    names = [k for k in exact if k in numerical]
+    w = np.asarray(weights, dtype=float)
+    norms = {k: _norms(np.asarray(exact[k], dtype=float), w) for k in names}
+    largest = {}
+    for k in names:
+        kind = field_kind(k)
+        if kind not in largest or norms[k][1] > norms[largest[kind]][1]:
+            largest[kind] = k
+    out = {}
+    for k in names:
+        ref = largest[field_kind(k)]
+        ref = ref if norms[ref][1] > 0 else None
+        out[k] = {**error_norms(numerical[k], exact[k], w, scale=norms[ref] if ref else (0.0, 0.0)),
+                  "relative_to": ref}
+    return out

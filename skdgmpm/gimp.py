@@ -17,13 +17,15 @@ The gradient is taken at fixed l_p: it is the domain average (1 / V_p) int chi_p
 The nodes are those of the scikit-fem mesh (``mesh.p``); the matrices are scipy CSR,
 (n_particles, n_nodes).
 """
-import functools
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 
+from . import parallel
 from .errors import InputError, InstabilityError
+from .kernel_cache import kernel_factory
 
 SHAPES = ("hat", "ugimp", "cpgimp")
 
@@ -93,38 +95,77 @@ def half_lengths(kind, l0, F=None, h=None):
     return np.clip(l0 * np.diagonal(F, axis1=1, axis2=2), 0.0, 0.5 * h)
 
 
-def _axis_hat(s, n):
-    """s (n_p,) positions in spacings from the origin -> nodes, weights, d/ds (n_p, 2)."""
-    k = np.clip(np.floor(s).astype(np.int64), 0, n - 2)
-    r = s - k
-    nodes = np.stack([k, k + 1], axis=1)
-    return nodes, np.stack([1.0 - r, r], axis=1), np.broadcast_to([-1.0, 1.0], nodes.shape)
+@njit(cache=True, inline="always")
+def _axis_hat(s, n, k, nodes, w, dw):
+    """Axis k of one particle at s (in spacings from the origin), hat functions: its 2 nodes,
+    weights and d/ds into nodes[k], w[k], dw[k]."""
+    i = min(max(np.floor(s), 0.0), n - 2.0)
+    r = s - i
+    nodes[k, 0], nodes[k, 1] = int(i), int(i) + 1
+    w[k, 0], w[k, 1] = 1.0 - r, r
+    dw[k, 0], dw[k, 1] = -1.0, 1.0
 
 
-def _axis_gimp(s, lp, n):
-    """GIMP weights on the nearest node and its two neighbours, in units of the spacing.
+@njit(cache=True, inline="always")
+def _axis_gimp(s, lp, n, k, nodes, w, dw):
+    """Axis k of one particle at s with half-length lp (both in spacings): GIMP weights on the
+    nearest node and its two neighbours, into nodes[k], w[k], dw[k].
 
     The domain is kept inside the grid (l_p <= distance to the grid's edge): S then stays a
     partition of unity without ghost nodes beyond the edge. Below 1e-8 h, l_p is taken as 0 (the
-    hat, its limit): the quadratic pieces would lose digits to cancellation.
-    """
-    lp = np.minimum(lp, np.minimum(s, n - 1 - s))
-    lp = np.where(lp < 1e-8, 0.0, lp)
-    nodes = np.rint(s).astype(np.int64)[:, None] + np.arange(-1, 2)
-    xi = s[:, None] - nodes
-    a, l = np.abs(xi), lp[:, None]
-    safe = np.where(l > 0, l, 1.0)                 # the quadratic pieces are empty when l_p = 0
-    k = np.clip(np.floor(s), 0, n - 2)[:, None]    # with l_p = 0: the hat's (one-sided) gradient
-    hat = np.where(nodes == k, -1.0, np.where(nodes == k + 1, 1.0, 0.0))
-    inner, outer = a < l, (a >= 1.0 - l) & (a < 1.0 + l)
-    w = np.where(inner, 1.0 - (xi ** 2 + l ** 2) / (2.0 * safe),
-                 np.where(outer, (1.0 + l - a) ** 2 / (4.0 * safe), np.maximum(1.0 - a, 0.0)))
-    dw = np.where(inner, -xi / safe,
-                  np.where(outer, -np.sign(xi) * (1.0 + l - a) / (2.0 * safe),
-                           np.where(a < 1.0, -np.sign(xi), 0.0)))
-    dw = np.where(l > 0, dw, hat)
-    valid = (nodes >= 0) & (nodes < n)
-    return np.clip(nodes, 0, n - 1), np.where(valid, w, 0.0), np.where(valid, dw, 0.0)
+    hat, its limit): the quadratic pieces would lose digits to cancellation."""
+    l = min(lp, min(s, n - 1 - s))
+    if l < 1e-8:
+        l = 0.0
+    safe = l if l > 0 else 1.0                 # the quadratic pieces are empty when l_p = 0
+    base = min(max(np.floor(s), 0.0), n - 2.0)  # with l_p = 0: the hat's (one-sided) gradient
+    centre = np.rint(s)
+    for j in range(3):
+        node = centre + (j - 1)
+        xi = s - node
+        a = abs(xi)
+        sign = 1.0 if xi > 0 else (-1.0 if xi < 0 else 0.0)
+        if a < l:
+            wj, dj = 1.0 - (xi ** 2 + l ** 2) / (2.0 * safe), -xi / safe
+        elif a >= 1.0 - l and a < 1.0 + l:
+            wj, dj = (1.0 + l - a) ** 2 / (4.0 * safe), -sign * (1.0 + l - a) / (2.0 * safe)
+        else:
+            wj, dj = max(1.0 - a, 0.0), (-sign if a < 1.0 else 0.0)
+        if not l > 0:
+            dj = -1.0 if node == base else (1.0 if node == base + 1 else 0.0)
+        if node < 0 or node >= n:
+            wj, dj = 0.0, 0.0
+        nodes[k, j] = int(min(max(node, 0.0), n - 1.0))
+        w[k, j], dw[k, j] = wj, dj
+
+
+@kernel_factory
+def _weights(d, m):                     # literal d and nodes per axis (2: hat, 3: GIMP)
+    def weights(s, lp, shape, h, lattice, cols, S, G):
+        """Per particle p: the m^d columns and values of row p of S and of each dS/dx_k (G[k]),
+        the tensor product of the axes' weights in lattice order (the last axis fastest)."""
+        nodes = np.empty((d, m), np.int64)
+        w, dw = np.empty((d, m)), np.empty((d, m))
+        for p in range(len(s)):
+            for k in range(d):
+                if m == 2:
+                    _axis_hat(s[p, k], shape[k], k, nodes, w, dw)
+                else:
+                    _axis_gimp(s[p, k], lp[p, k], shape[k], k, nodes, w, dw)
+                for j in range(m):
+                    dw[k, j] = dw[k, j] / h[k]
+            for e in range(m ** d):
+                if d == 1:
+                    cols[p, e] = lattice[nodes[0, e]]
+                    S[p, e] = w[0, e]
+                    G[0, p, e] = dw[0, e]
+                else:
+                    i0, i1 = e // m, e % m
+                    cols[p, e] = lattice[nodes[0, i0], nodes[1, i1]]
+                    S[p, e] = w[0, i0] * w[1, i1]
+                    G[0, p, e] = dw[0, i0] * w[1, i1]
+                    G[1, p, e] = w[0, i0] * dw[1, i1]
+    return weights
 
 
 @dataclass
@@ -149,20 +190,16 @@ def shape_functions(lattice, x, kind, lp=None, step=None, time=None):
         raise InstabilityError(
             f"particle {p} at x = {np.round(x[p], 6).tolist()} is outside the background grid "
             f"[{lattice.origin.tolist()}, {lattice.upper.tolist()}]{when}", step=step, time=time, particle=p)
-    s = np.clip(s, 0.0, np.array(lattice.shape) - 1)
-    axes = [_axis_hat(s[:, k], lattice.shape[k]) if kind == "hat"
-            else _axis_gimp(s[:, k], lp[:, k] / lattice.h[k], lattice.shape[k]) for k in range(d)]
-    # tensor product: (n, m, m) in 2D, flattened to m^d entries per row
-    n = len(x)
-    idx = tuple(a[0].reshape((n,) + (1,) * k + (-1,) + (1,) * (d - 1 - k)) for k, a in enumerate(axes))
-    w = [a[1].reshape(idx[k].shape) for k, a in enumerate(axes)]
-    dw = [a[2].reshape(idx[k].shape) / lattice.h[k] for k, a in enumerate(axes)]
-    cols = lattice.node[idx].reshape(n, -1)
-    m = cols.shape[1]
-    indptr = np.arange(0, n * m + 1, m)
+    s = np.ascontiguousarray(np.clip(s, 0.0, np.array(lattice.shape) - 1))
+    n, m = len(x), 2 if kind == "hat" else 3
+    lp = np.zeros((n, d)) if kind == "hat" else np.ascontiguousarray(lp / lattice.h)
+    cols, S, G = np.empty((n, m ** d), np.int64), np.empty((n, m ** d)), np.empty((d, n, m ** d))
+    kernel, shape = _weights(d, m), np.array(lattice.shape, dtype=np.int64)
+    parallel.rows(n, lambda lo, hi: kernel(s[lo:hi], lp[lo:hi], shape, lattice.h, lattice.node, cols[lo:hi],
+                                           S[lo:hi], G[:, lo:hi]))
+    indptr = np.arange(0, n * m ** d + 1, m ** d)
 
-    def csr(factors):                               # m^d entries per row, in the order of cols
-        values = functools.reduce(np.multiply, factors)
+    def csr(values):                                # m^d entries per row, in the order of cols
         return sp.csr_matrix((values.ravel(), cols.ravel(), indptr), shape=(n, lattice.n_nodes))
 
-    return ShapeFunctions(csr(w), [csr([dw[j] if j == k else w[j] for j in range(d)]) for k in range(d)])
+    return ShapeFunctions(csr(S), [csr(G[k]) for k in range(d)])

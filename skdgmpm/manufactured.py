@@ -13,13 +13,13 @@ its divergence is taken by the chain rule with the law's analytic tangent,
 
 which is exact and works for every law without writing the law in sympy (the tangents are
 tested against finite differences in tests/test_materials.py). The body force (per unit mass,
-m/s^2) that makes ``u`` exact for ``dp/dt - DIV P = rho0 b`` (METHOD §1) is
+m/s^2) that makes ``u`` exact for ``dp/dt - DIV P = rho0 b`` is
 
     b = a - DIV P / rho0.
 
 Plane strain in 2D (1D: uniaxial strain): F is embedded in 3D as in the laws (F33 = 1).
 
-The registered problems of METHOD §8 (`MMSAxisAligned`, `MMSRing`, names ``"mms_axis_aligned"``
+The registered problems of WG08 §5 (`MMSAxisAligned`, `MMSRing`, names ``"mms_axis_aligned"``
 and ``"mms_ring"`` in ``skdgmpm.exact.EXACT``) take the scene's material; their objects answer
 like the other exact solutions (``fields(X, t)``) and also give ``body_force(X, t)`` and
 ``displacement(X, t)``.
@@ -190,7 +190,7 @@ def _embed(F):
 
 @dataclass(kw_only=True, eq=False)
 class MMSAxisAligned(ManufacturedSolution):
-    """Axis-aligned displacement on the unit square [WG08 §5.1], METHOD §8.1:
+    """Axis-aligned displacement on the unit square [WG08 §5.1]:
 
         u = (A sin(pi X) cos(c pi t), A sin(pi Y) sin(c pi t)),   c = sqrt(E / rho0).
 
@@ -218,7 +218,7 @@ class MMSAxisAligned(ManufacturedSolution):
 
 @dataclass(kw_only=True, eq=False)
 class MMSRing(ManufacturedSolution):
-    """Expanding ring [WG08 §5.2], METHOD §8.2: radial displacement about ``centre``
+    """Expanding ring [WG08 §5.2]: radial displacement about ``centre``
 
         u = A cos(c pi t) g(R) e_R,   g(R) = c3 R^3 + c2 R^2 + c1 R,   c = sqrt(E / rho0),
         c3 = -2 / (R_O^2 (R_O - 3 R_I)),  c2 = 3 (R_O + R_I) / (R_O^2 (R_O - 3 R_I)),

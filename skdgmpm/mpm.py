@@ -1,7 +1,7 @@
 """Updated-Lagrangian MPM / GIMP [WG08], the baseline DGMPM is compared with [R18 §7.1].
 
 Particles carry mass m_p = rho0 V0_p, F, P and v and move through the whole background grid
-(METHOD §8). One step is a short list of named stages; an update variant is the order of those
+(WG08). One step is a short list of named stages; an update variant is the order of those
 stages (cb-geo style):
 
     shape_functions -> project -> impose_velocity -> [strain_stress (USF)] -> grid_forces

@@ -91,6 +91,20 @@ def _busy(out, holder):
                       "another --out")
 
 
+def numbered(base):
+    """The default output folder of a command given no ``--out``: ``base`` (e.g. runs/SCENE) if it
+    does not exist or is an empty folder, else the first free ``base-2``, ``base-3``, ... Running
+    the same command again never touches an earlier run's (or anyone's) files; nothing is created
+    here (a run refused for bad input writes nothing)."""
+    base = Path(base)
+    k = 1
+    while True:
+        path = base if k == 1 else base.with_name(f"{base.name}-{k}")
+        if not path.exists() or (path.is_dir() and not any(path.iterdir())):
+            return path
+        k += 1
+
+
 def check(out, force=False, resume=False):
     """Refuse ``out`` before anything is computed or written: not a folder, locked by a running
     run, or (unless ``force`` or ``resume``) not empty. Creates nothing."""

@@ -24,7 +24,8 @@ from .errors import InputError
 
 class Picture:
     """A rendered picture: ``array`` (height, width, 3) uint8 pixels, ``figure`` the matplotlib
-    figure of a line plot (None for a pyvista picture). Shown inline by Jupyter."""
+    `Figure` of a line plot (None for a pyvista picture), ``savefig(path)`` / ``save(path)`` write
+    it. Shown inline by Jupyter."""
 
     def __init__(self, array=None, figure=None):
         self._array, self.figure = array, figure
@@ -43,6 +44,14 @@ class Picture:
         path = Path(path)
         path.write_bytes(self._repr_png_())
         return path
+
+    def savefig(self, path, **options):
+        """As matplotlib's ``Figure.savefig`` for a line plot (any format, ``dpi=``, ...); a
+        rendered picture is written as a PNG. Returns the path."""
+        if self.figure is None:
+            return self.save(path)
+        self.figure.savefig(path, **options)
+        return Path(path)
 
     def _repr_png_(self):
         buffer = io.BytesIO()
@@ -105,24 +114,47 @@ def field_values(result, state, field):
 # fields that are non-negative by definition (the equivalent plastic strain, the speed): shown
 # from 0 on a sequential colour map, where a diverging one centred on 0 would waste half its colours
 SEQUENTIAL = ("eqp", "speed")
-
-
-def default_cmap(field):
-    return "viridis" if field in SEQUENTIAL else "coolwarm"
+# fields whose values are labels, not amounts: one distinct colour each
+CATEGORICAL = ("material",)
+# a field whose values of one sign reach at most this fraction of the other sign's extreme is shown
+# as one-signed (the partial impact's P11: compression, with overshoots of 3 % into tension)
+ONE_SIGNED = 0.1
 
 
 def colour_range(values, field=None):
-    """(lo, hi) over a list of arrays; from 0 for the non-negative fields of `SEQUENTIAL`, else
-    symmetric about 0 when the values take both signs (zero is then the white middle of the
-    default diverging colour map)."""
+    """(lo, hi) over a list of arrays. From 0 for the non-negative fields of `SEQUENTIAL`; for a
+    field of both signs, symmetric about 0 (zero is then the white middle of the diverging map),
+    unless it is almost one-signed (the minority sign reaches at most `ONE_SIGNED` of the
+    majority's extreme): then the values' own range, on a sequential map (`default_cmap`), so
+    that the main wave takes the whole colour scale. `CATEGORICAL` fields: one bin per value."""
     lo, hi = min(float(v.min()) for v in values), max(float(v.max()) for v in values)
+    if field in CATEGORICAL:
+        return float(np.floor(lo)) - 0.5, float(np.ceil(hi)) + 0.5
     if field in SEQUENTIAL:
         lo = 0.0
-    elif lo <= 0.0 <= hi:
+    elif lo < 0.0 < hi and min(-lo, hi) > ONE_SIGNED * max(-lo, hi):
         lo, hi = -max(-lo, hi), max(-lo, hi)
     if lo == hi:
         lo, hi = lo - max(abs(lo), 1.0) * 1e-3, hi + max(abs(hi), 1.0) * 1e-3
     return lo, hi
+
+
+def default_cmap(field, clim=None):
+    """The colour map of ``field`` over the range ``clim`` (`colour_range`): categorical (tab10)
+    for `CATEGORICAL` fields; viridis for `SEQUENTIAL` ones; diverging (coolwarm: negative blue,
+    0 white, positive red) for a range symmetric about 0; otherwise sequential in the same colours,
+    white at 0 and darkest at the largest magnitude: Blues for mostly negative values, Reds for
+    mostly positive ones."""
+    if field in CATEGORICAL:
+        return "tab10"
+    if field in SEQUENTIAL:
+        return "viridis"
+    if clim is None:
+        return "coolwarm"
+    lo, hi = clim
+    if lo < 0.0 < hi and np.isclose(-lo, hi, rtol=1e-9):
+        return "coolwarm"
+    return "Blues_r" if -lo > hi else "Reds"
 
 
 def _pad3(a):
@@ -175,7 +207,9 @@ def plotter(result, field="P11", time=None, grid=True, off_screen=True, window_s
     ``magnify`` scales the displacement x - X (small-strain scenes show nothing at 1);
     ``point_size`` is in pixels (default: about one particle spacing); ``clim`` = (lo, hi)
     (default: the values' range, symmetric about 0 if they take both signs; from 0 for eqp and
-    speed); ``cmap`` (default: coolwarm, viridis for eqp and speed). ``off_screen=False``
+    speed; the values' own range when they are almost all of one sign); ``cmap`` (default:
+    `default_cmap`: diverging for a symmetric range, sequential for one-signed fields, categorical
+    for material). ``off_screen=False``
     gives a plotter whose ``show()`` opens a window (needs a display).
     """
     return _plotter(result, field, time, grid, off_screen, window_size, clim, cmap, point_size,
@@ -188,18 +222,34 @@ def _plotter(result, field, time, grid, off_screen, window_size, clim=None, cmap
     state = frame(result, time)
     cloud = pv.PolyData(_positions(result, state, magnify))
     cloud[field] = field_values(result, state, field)
+    categorical = {}
+    if field in CATEGORICAL:                      # one colour and one named entry per material
+        laws = [f"{getattr(m, 'law_name', type(m).__name__)}, E = {m.E:.3g} Pa"
+                for m in result.stepper.materials.materials]
+        clim = (-0.5, len(laws) - 0.5)
+        if cmap is None:
+            from matplotlib import colormaps
+            from matplotlib.colors import ListedColormap
+            cmap = ListedColormap(colormaps["tab10"].colors[: len(laws)])
+        categorical = {"n_colors": len(laws), "annotations": {float(k): f"{k}: {law}" for k, law in enumerate(laws)}}
     clim = colour_range([cloud[field]], field) if clim is None else clim
-    cmap = default_cmap(field) if cmap is None else cmap
+    cmap = default_cmap(field, clim) if cmap is None else cmap
     pl = pv.Plotter(off_screen=off_screen, window_size=list(window_size))
     pl.set_background("white")
     size = float(np.ptp(result.X, axis=0).max())
     if grid:
         pl.add_mesh(grid_mesh(result, z=-1e-3 * size), style="wireframe", color="#bbbbbb", line_width=1)
-    bar = {"title": plots.field_label(field), "color": "black", "fmt": "%.3g", "vertical": False,
-           "n_labels": 3, "title_font_size": 14, "label_font_size": 12,
-           "position_x": 0.25, "position_y": 0.03, "width": 0.5, "height": 0.1}
+    # the bar's title is written to its left (as a VTK title it shares the band above the bar with
+    # the tick labels and overlapped them); ticks: the two ends and the middle
+    bar = {"title": "", "color": "black", "fmt": "%.3g", "vertical": False,
+           "n_labels": 0 if categorical else 3, "label_font_size": 12,
+           "position_x": 0.3, "position_y": 0.03, "width": 0.55, "height": 0.1}
+    if categorical:                               # the names go below the bar: lift it
+        bar.update(position_y=0.09, height=0.06)
     points = pl.add_points(cloud, scalars=field, cmap=cmap, clim=clim, render_points_as_spheres=True,
-                           point_size=point_size or 5, scalar_bar_args=bar)
+                           point_size=point_size or 5, scalar_bar_args=bar, **categorical)
+    pl.add_text(plots.field_label(field), position=(int(0.03 * window_size[0]), int(0.045 * window_size[1])),
+                font_size=8, color="black", name="bar_title")
     pl.add_text(title or _title(result, state), font_size=10, color="black", name="title")
     pl.view_xy()
     pl.enable_parallel_projection()

@@ -90,10 +90,15 @@ def segment_particles(result, start, end, tol=None):
 
 
 def bottom_segment(result):
-    """The bar (1D) or the line of particles of smallest X2 (2D), as (start, end)."""
-    idx = line_particles(result)
-    X = result.X[idx]
-    return X[0], X[-1]
+    """The bar (1D), or in 2D the horizontal line through the particle of smallest X2 across the
+    body's X1 range, as (start, end): the bottom row of a structured grid; on an unstructured mesh
+    (one particle lowest) the particles within half a spacing of that line (`segment_particles`)."""
+    if result.X.shape[1] == 1:
+        idx = line_particles(result)
+        return result.X[idx[0]], result.X[idx[-1]]
+    X = result.X
+    y0 = X[:, 1].min()
+    return np.array([X[:, 0].min(), y0]), np.array([X[:, 0].max(), y0])
 
 
 def line(result, field="P11", state=None, start=None, end=None, ax=None, label=None, exact=True):

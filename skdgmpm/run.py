@@ -14,7 +14,7 @@ import numpy as np
 from . import checkpoint, guards, outdir, output, parallel, probes as gauges
 from .build import build
 from .errors import InputError, InstabilityError, OutputError
-from .exact import error_norms
+from .exact import relative_errors
 from .kernel_cache import compile_notice
 from .scene import Scene, exact_solution, load_scene
 
@@ -82,7 +82,8 @@ class Result:
         method = s.data["method"]
         out = {
             "case": s.name, "title": s.get("title", ""), "method": method.get("name", "dgmpm"),
-            "order": int(getattr(st, "order", 1)), "integrator": st.integrator, "transverse": st.transverse,
+            "order": int(getattr(st, "order", 1)), "integrator": st.integrator,
+            "transverse": st.transverse if s.dim > 1 or method.get("name", "dgmpm") != "dgmpm" else "none",
             "cfl": st.cfl, "dim": s.dim, "cells": int(st.grid.submesh.nelements),
             "grid_cells": int(st.grid.mesh.nelements), "particles": len(self.disc.particles),
             "dofs": int(st.n_dofs_total), "steps": int(self.state.step),
@@ -148,12 +149,11 @@ def compute_errors(disc, state, solution):
         return {}
     fields = output.particle_fields(disc.stepper, state)
     exact = solution.fields(disc.particles.X, state.t)
-    return {k: error_norms(fields[k], exact[k], disc.particles.volume)
-            for k in exact if k in fields}
+    return relative_errors(fields, exact, disc.particles.volume)
 
 
 def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=None, max_steps=None,
-        on_step=None, resume=None, signals=None):
+        on_step=None, resume=None, signals=None, notice=None):
     """Run ``scene`` (a `Scene`, a name or a path). Writes outputs to ``out`` if given.
     ``max_steps`` stops the run early (benchmarks); ``on_step(state, disc)`` is called with the initial
     state and after every step (error measures over the whole run, e.g. WG08's).
@@ -165,6 +165,7 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
     the main thread), on SIGINT or SIGTERM, after which the run returns with status "interrupted".
     ``resume=DIR`` continues the run checkpointed in DIR (no scene or overrides: the run goes on
     with the scene it started with), its outputs bit-identical to an uninterrupted run's.
+    ``notice`` (default: ``progress``): say on stderr, in one line, when the kernels compile.
     """
     saved = None
     if resume is not None:
@@ -177,6 +178,7 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
         saved = checkpoint.read(out)
         scene = Scene.from_dict(saved.scene_data, saved.scene_name,
                                 Path(saved.scene_path) if saved.scene_path else None)
+        scene.overridden = saved.scene_overridden
         n_frames = saved.n_frames
     elif scene is None:
         raise InputError("no scene given (a name from 'skdgmpm list' or a .toml path), nor --resume DIR")
@@ -201,7 +203,8 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
         out = Path(out)
         outdir.check(out, force, resume=saved is not None)
     begin = time.perf_counter()
-    notice = compile_notice(scene.get("method.name", "dgmpm"), scene.dim) if progress else nullcontext()
+    notice = (compile_notice(scene.get("method.name", "dgmpm"), scene.dim)
+              if (progress if notice is None else notice) else nullcontext())
     with notice:                          # a line on stderr if the kernels are not in the cache
         disc = build(scene)
     solution = exact_solution(scene)
@@ -230,9 +233,9 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
             folder.release()
 
 
-def resume(folder, progress=True, signals=None):
+def resume(folder, progress=True, signals=None, notice=None):
     """Continue the run checkpointed in ``folder`` (what ``skdgmpm run --resume DIR`` does)."""
-    return run(resume=folder, progress=progress, signals=signals)
+    return run(resume=folder, progress=progress, signals=signals, notice=notice)
 
 
 class _Signals:
@@ -341,15 +344,17 @@ def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, progress, 
                     if warm is None:
                         bar.unpause()             # the first step compiles: its time is not in the rate
                     step_guard.check(state, new, t_end)
-                    bar.update(new.t - state.t)
-                    state = new
-                    frame_due = state.t >= next_frame * t_end / max(n_frames, 1) * (1 - 1e-12)
+                    frame_due = new.t >= next_frame * t_end / max(n_frames, 1) * (1 - 1e-12)
                     # a row of energy.csv (and the balance's check) on steps fixed by the scene alone,
                     # so that a resumed run writes the rows an uninterrupted one does
-                    if (state.step % energy_every == 0 or frame_due or state.t >= t_end * (1 - 1e-12)
-                            or state.step == max_steps):
-                        energies = stepper.energy(state)
-                        energy_guard.check(state, sum(energies), stepper.external_work)
+                    energies = None
+                    if (new.step % energy_every == 0 or frame_due or new.t >= t_end * (1 - 1e-12)
+                            or new.step == max_steps):
+                        energies = stepper.energy(new)
+                        energy_guard.check(new, sum(energies), stepper.external_work)
+                    bar.update(new.t - state.t)
+                    state = new
+                    if energies is not None:
                         record(state, energies)
                     if probes is not None and (probes.due(state.step) or state.t >= t_end * (1 - 1e-12)
                                                or state.step == max_steps):
@@ -407,8 +412,8 @@ def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, progress, 
 
 
 def _plots(result, folder, atomic=None):
-    """energy.png, profile.png, probes.png (with [probes]) and eqp.png (a law with plastic flow) into
-    ``folder``; each written
+    """energy.png, profile.png (always; against the exact solution when there is one), probes.png
+    (with [probes]) and eqp.png (a law with plastic flow) into ``folder``; each written
     through ``atomic(path, write)`` if given (`outdir.atomic_write`: never half a PNG)."""
     try:
         from . import plots
@@ -416,8 +421,7 @@ def _plots(result, folder, atomic=None):
         return
     atomic = atomic or (lambda path, write: write(path))
     atomic(folder / "energy.png", lambda p: plots.energy(result, p))
-    if result.scene.dim == 1 or result.exact is not None:
-        atomic(folder / "profile.png", lambda p: plots.profile(result, p))
+    atomic(folder / "profile.png", lambda p: plots.profile(result, p))     # with the exact solution if any
     if result.probes is not None:
         atomic(folder / "probes.png", lambda p: plots.probes(result, p))
     if "eqp" in result.fields():                # a law with plastic flow: where it flowed
@@ -450,5 +454,7 @@ def progress_bar(enabled, total, **options):
 
 
 def _progress(total, name, enabled):
-    return progress_bar(enabled, total, desc=name, unit="s",
+    # delay: a run shorter than a second draws no bar, so leaves no cleared bar line (a blank line
+    # in a log or a notebook's `!skdgmpm run`) before its summary
+    return progress_bar(enabled, total, desc=name, unit="s", delay=1.0,
                         bar_format="{desc}: {percentage:3.0f}%|{bar}| t={n:.3g}/{total:.3g} s [{elapsed}<{remaining}]")

@@ -2,8 +2,9 @@
 
 A scene names its grid (generated, or a mesh file read through meshio), material, particles,
 initial state, boundary conditions by boundary name, method, end time, outputs and, when there is
-one, the exact solution. Every key can be overridden (``--set method.cfl=0.5``). See
-``cases/*.toml`` and docs/scenes.md.
+one, the exact solution. Every key can be overridden (``--set method.cfl=0.5``). Every key, with
+type, unit, default, example and the methods that read it: docs/scenes.md, generated from
+`skdgmpm.scene_keys` (``skdgmpm scenes schema`` prints it); the scenes: ``cases/*.toml``.
 """
 import copy
 import tomllib
@@ -122,6 +123,49 @@ def find_scene(name):
     if name not in scenes:
         raise InputError(f"scene {name!r} is unknown (known: {', '.join(scenes)})")
     return scenes[name]
+
+
+def scene_files(name):
+    """The files of a scene: its .toml and the files it reads (grid.mesh, particles.file), as
+    (source path, path relative to the scene file's folder)."""
+    path = find_scene(str(name))
+    data = load_scene(path).data
+    files = [(path, Path(path.name))]
+    for key in ("grid.mesh", "particles.file"):
+        table, leaf = key.split(".")
+        relative = data.get(table, {}).get(leaf)
+        if isinstance(relative, str):
+            source = path.parent / relative
+            if not source.is_file():
+                raise InputError(f"{path}: {key} = {relative!r}: file {source} not found")
+            if Path(relative).is_absolute() or ".." in Path(relative).parts:
+                raise InputError(f"{path}: {key} = {relative!r} is outside the scene's folder: copy it by hand")
+            files.append((source, Path(relative)))
+    return files
+
+
+def copy_scene(name, folder, force=False):
+    """Copy scene ``name`` with the files it reads into ``folder`` (created), so that
+    ``skdgmpm run FOLDER/NAME.toml`` runs it from there. Refuses, before copying anything, to
+    overwrite an existing file unless ``force``. Returns the paths written."""
+    import shutil
+
+    folder = Path(folder)
+    files = scene_files(name)
+    if folder.exists() and not folder.is_dir():
+        raise InputError(f"{folder}: exists and is not a directory")
+    existing = [str(folder / rel) for _, rel in files if (folder / rel).exists()]
+    if existing and not force:
+        raise InputError(f"{', '.join(existing)}: exists already (use --force to overwrite)")
+    written = []
+    try:
+        for source, rel in files:
+            (folder / rel).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(source, folder / rel)
+            written.append(folder / rel)
+    except OSError as exc:
+        raise InputError(f"{folder}: cannot copy the scene ({exc.strerror or exc})") from None
+    return written
 
 
 @dataclass

@@ -254,12 +254,23 @@ class StabilityReport:
     rk2_spectral: float
 
     def format(self):
-        """Aligned text table: integrator rows, criterion columns, CFL to 2 decimals."""
+        """Aligned text table (integrator rows; the CFL limit, then the max-norm bound, to 2
+        decimals) followed by what each number means."""
         lay = ", ".join(f"{x:.4g}" for x in self.layout)
-        rows = [f"layout: {lay}", f"{'method':<8}{'bound':>8}{'spectral':>10}"]
+        rows = [f"layout: {lay} (parent coordinates of the particles in a cell); first-order DGMPM, "
+                f"1D advection [R18 §6]",
+                f"{'method':<8}{'CFL limit':>11}{'max-norm bound':>16}"]
         for name in ("euler", "rk2"):
             b, s = getattr(self, f"{name}_bound"), getattr(self, f"{name}_spectral")
-            rows.append(f"{name:<8}{b:>8.2f}{s:>10.2f}")
+            rows.append(f"{name:<8}{s:>11.2f}{b:>16.2f}")
+        rows += [
+            "CFL limit: the von Neumann limit, the largest CFL at which no Fourier mode grows (spectral",
+            "  radius <= 1); above it a run blows up, and skdgmpm run refuses a DGMPM CFL above it",
+            "  (method.cfl_above_limit = true runs it anyway).",
+            "max-norm bound: the sufficient condition of R18 eq 64; below it the largest value of the",
+            "  solution cannot grow from one step to the next. Between the two the scheme is stable",
+            "  in the von Neumann (L2) sense, but the largest value may grow from one step to the next.",
+        ]
         return "\n".join(rows)
 
 

@@ -313,10 +313,10 @@ class GridReference:
 def reference_errors(out, reference, fields):
     """Relative errors of a study run's fields (``study_run(..., keep_fields=True)``) against a
     `GridReference` at the same points and time."""
-    from .exact import error_norms
+    from .exact import relative_errors
 
-    ref = reference.fields(out["X"], out["t"])
-    return {k: error_norms(out["fields"][k], ref[k], out["volume"]) for k in fields}
+    errors = relative_errors(out["fields"], reference.fields(out["X"], out["t"]), out["volume"])
+    return {k: errors[k] for k in fields if k in errors}
 
 
 def _curves(rows, column):

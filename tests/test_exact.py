@@ -400,3 +400,31 @@ def test_elastoplastic_bar_from_a_scene():
     b = exact_solution(scene)
     assert isinstance(b, ElastoplasticBarStep)
     assert (b.traction, b.length, b.nu, b.sigma_y, b.H) == (-1e9, 6.0, 0.3, 4e8, 1e9) and b.plastic
+
+
+def test_relative_errors_measure_a_near_zero_component_against_its_quantity():
+    """P12 of a plane wave is round-off around zero: against its own norm its error would read as
+    1e4 (the issue-18 alarm); against the largest P component it is what it is, 1e-9 of the load."""
+    from skdgmpm.exact import relative_errors
+
+    w = np.ones(4)
+    exact = {"P11": np.array([-1e9, -1e9, 0.0, 0.0]), "P12": np.array([1e-5, -1e-5, 0.0, 0.0]),
+             "v1": np.array([5.0, 5.0, 0.0, 0.0]), "x1": np.zeros(4)}
+    numerical = {"P11": exact["P11"] * 1.01, "P12": np.array([1.0, -1.0, 0.0, 0.0]),
+                 "v1": exact["v1"], "x1": np.full(4, 1e-3)}
+    e = relative_errors(numerical, exact, w)
+    assert e["P11"]["relative_to"] == "P11" and math.isclose(e["P11"]["L1_rel"], 0.01)
+    assert e["P12"]["relative_to"] == "P11"
+    assert math.isclose(e["P12"]["L1_rel"], 2.0 / 2e9, rel_tol=1e-4)
+    assert math.isclose(e["P12"]["L2_rel"], math.sqrt(2) / math.sqrt(2e18), rel_tol=1e-4)
+    assert error_norms(numerical["P12"], exact["P12"], w)["L1_rel"] > 1e4        # what it said before
+    assert e["v1"] == {"L1_rel": 0.0, "L2_rel": 0.0, "Linf": 0.0, "relative_to": "v1"}
+    assert e["x1"]["relative_to"] is None and math.isclose(e["x1"]["L1_rel"], 4e-3)   # zero quantity: absolute
+
+
+def test_run_errors_say_relative_to_what():
+    from skdgmpm.run import run
+
+    r = run("plane_wave_svk_2d", ["run.t_end=1e-4"], progress=False)
+    assert r.errors["P11"]["relative_to"] == "P11" and r.errors["P22"]["relative_to"] == "P11"
+    assert r.errors["v1"]["relative_to"] == "v1"

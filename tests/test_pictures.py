@@ -142,10 +142,45 @@ def test_repr_is_one_line_with_scene_method_steps_time_and_errors(wave, bar):
 
 
 def test_non_negative_fields_get_a_sequential_range_from_zero():
-    """eqp (and speed) start at 0 on a sequential map; signed fields stay symmetric about 0 on the
-    diverging one (where 0 is white), also when their values touch 0 from one side."""
+    """eqp (and speed) start at 0 on a sequential map; a field of both signs is symmetric about 0
+    on the diverging map (0 white); a field (almost) all of one sign gets its own range on a
+    sequential map in the sign's colour (issue 18: the partial impact's P11, compression with 3 %
+    overshoots into tension, was pale on a symmetric range)."""
     from skdgmpm.pictures import colour_range, default_cmap
     eqp = np.array([0.0, 0.0, 0.02, 0.064])
     assert colour_range([eqp], "eqp") == (0.0, 0.064) and default_cmap("eqp") == "viridis"
-    assert colour_range([eqp], "P11") == (-0.064, 0.064) and default_cmap("P11") == "coolwarm"
-    assert colour_range([np.array([-2e9, 0.0])], "P11") == (-2e9, 2e9)
+    assert colour_range([eqp], "P11") == (0.0, 0.064) and default_cmap("P11", (0.0, 0.064)) == "Reds"
+    assert colour_range([np.array([-2e9, 0.0])], "P11") == (-2e9, 0.0)
+    assert default_cmap("P11", (-2e9, 0.0)) == "Blues_r"
+    almost = [np.array([-5.18e8, -2e8, 0.0, 1.55e7])]                # 3 % into tension
+    assert colour_range(almost, "P11") == (-5.18e8, 1.55e7) and default_cmap("P11", (-5.18e8, 1.55e7)) == "Blues_r"
+    both = [np.array([-1e9, 0.0, 3e8])]                               # 30 %: both signs matter
+    assert colour_range(both, "P11") == (-1e9, 1e9) and default_cmap("P11", (-1e9, 1e9)) == "coolwarm"
+    assert colour_range([np.array([0.0, 1.0, 1.0])], "material") == (-0.5, 1.5)
+    assert default_cmap("material") == "tab10"
+
+
+def test_material_gets_one_flat_colour_per_material(rendering, tmp_path):
+    """Two materials (regions by physical surface): the picture shows two hues, neither a shade of
+    a diverging map's white middle; the legend names each law."""
+    alu = 'material = {law = "linear_elastic", E = 7.0e10, nu = 0.33, rho = 2700.0}'
+    r = run("partial_impact_2d", ['grid.mesh="plate_steel_alu_4x3.msh"', f'regions=[{{subdomain = "alu", {alu}}}]',
+                                  "run.t_end=1e-5"], progress=False)
+    pl = pictures.plotter(r, "material", window_size=(400, 250))
+    try:
+        mapper = pl.mapper
+        assert mapper.lookup_table.n_values == 2 and tuple(mapper.scalar_range) == (-0.5, 1.5)
+    finally:
+        pl.close()
+    image = _pixels(r.plot("material", grid=False, window_size=(400, 250), path=tmp_path / "m.png").save(tmp_path / "m.png"))
+    hue = np.argmax(image, axis=2)[np.ptp(image, axis=2) > 80]      # saturated pixels: blue (2) and orange (0)
+    assert (hue == 2).mean() > 0.2 and (hue == 0).mean() > 0.2
+
+
+def test_line_picture_has_a_matplotlib_figure_and_savefig(bar, tmp_path):
+    picture = bar.plot_line("P11")
+    assert isinstance(picture.figure, Figure)
+    assert picture.savefig(tmp_path / "line.pdf") == tmp_path / "line.pdf"
+    assert (tmp_path / "line.pdf").read_bytes().startswith(b"%PDF")
+    picture.savefig(tmp_path / "line.png", dpi=50)
+    assert _pixels(tmp_path / "line.png").shape[1] == int(6.4 * 50)

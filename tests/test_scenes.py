@@ -121,6 +121,20 @@ def test_svk_bar_l1_error_decreases_under_refinement(scene, record_property):
     assert rates.min() > 0.3
 
 
+def test_svk_tension_overshoot_comes_from_the_cfl_1_step():
+    """R18 §7.2.2: oscillations behind the tensile shock at CFL 1 that "can be removed with a
+    Courant number smaller than one". The overshoot of P11 over the Hugoniot state (2e10 Pa) at
+    six frames to 6e-4 s: 1.1-2.0 % at CFL 1, varying from frame to frame with no trend (0.5 %
+    and 1.1 % at two of them), 1.96 -> 0.49 % on 300 cells; at CFL 0.95 and below, 0.02-0.18 %.
+    So it is the time step: the CFL-1 step is set by the fastest characteristic behind the shock,
+    c(F*) = 6459 m/s > the shock's 6171 m/s (R18 eq A.13), not the Riemann linearisation."""
+    def overshoots(cfl):
+        r = run("bar_svk_tension_1d", [f"method.cfl={cfl}", "run.frames=6"], progress=False)
+        return np.array([f.Q[:, 0].max() / 2e10 - 1 for f in r.frames[1:]])
+    assert overshoots(1.0).max() > 0.01
+    assert overshoots(0.9).max() < 1e-3
+
+
 def test_plane_wave_stays_one_dimensional_and_matches_1d_run():
     """R18 §7.3: with symmetry on top and bottom the 2D solution is the 1D one: no transverse
     variation beyond round-off, and along the bottom line the same values as the 1D scheme with

@@ -142,10 +142,12 @@ def test_report_format():
     report = st.analyse("1/4, 3/4")
     assert report.euler_bound == pytest.approx(0.43, abs=0.01)
     lines = report.format().splitlines()
-    assert lines[1].split() == ["method", "bound", "spectral"]
+    assert lines[1].split() == ["method", "CFL", "limit", "max-norm", "bound"]
     assert lines[2].split()[0] == "euler" and lines[3].split()[0] == "rk2"
-    assert lines[2].split()[1] == "0.43"
-    assert len({len(line) for line in lines[1:]}) == 1  # aligned
+    assert lines[2].split()[1:] == ["0.69", "0.43"]           # the von Neumann limit first
+    assert len({len(line) for line in lines[1:4]}) == 1  # aligned
+    text = report.format()
+    assert "CFL limit: the von Neumann limit" in text and "max-norm bound: the sufficient condition" in text
 
 
 def test_parse_layout():
