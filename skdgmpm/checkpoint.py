@@ -11,8 +11,8 @@
   ``history_n``, ADER ``_repeated``); tests/test_checkpoint.py checks that a step changes nothing
   else;
 - the scene as run (overrides applied) with its path (mesh files resolve against it), the run's
-  options (frames), the energy history, the frames written so far and the next frame's index, the
-  wall and start-up times so far.
+  options (frames), the energy history, the probes' rows, the frames written so far and the next
+  frame's index, the wall and start-up times so far.
 
 It is written atomically (`outdir.atomic_write`): a run killed while writing it keeps the previous
 one. ``run.checkpoint_every`` sets how often: an integer is a number of steps, a string "30 s",
@@ -109,9 +109,11 @@ class Checkpoint:
     startup_s: float
     dt0: float
     scene_overridden: tuple = ()  # the keys --set gave (messages, and the ignored-key warnings)
+    probes: np.ndarray = None     # (rows, columns) of the probes (`skdgmpm.probes.Probes.table`)
 
 
-def write(folder, scene, state, stepper, history, entries, next_frame, n_frames, wall_s, startup_s, dt0):
+def write(folder, scene, state, stepper, history, entries, next_frame, n_frames, wall_s, startup_s, dt0,
+          probes=None):
     """Write ``folder/checkpoint.npz`` atomically."""
     arrays = {"U": state.U, "Q": state.Q, "x": state.x}
     for name in ("speed", "dofs", "history"):
@@ -120,6 +122,8 @@ def write(folder, scene, state, stepper, history, entries, next_frame, n_frames,
             arrays[name] = value
     for key, values in history.items():
         arrays[f"energy_{key}"] = np.asarray(values)
+    if probes is not None:
+        arrays["probes"] = probes.table()
     meta = {
         "format": FORMAT, "t": state.t, "step": int(state.step), "health": state.health,
         "scene": {"name": scene.name, "data": scene.data, "path": str(Path(scene.path).resolve()) if scene.path else None,
@@ -163,4 +167,4 @@ def read(folder):
     return Checkpoint(s["name"], s["data"], s["path"], state, meta["stepper"], history,
                       [(t, name, step) for t, name, step in meta["entries"]], meta["next_frame"],
                       meta["n_frames"], meta["wall_s"], meta["startup_s"], meta["dt0"],
-                      tuple(s.get("overridden", ())))
+                      tuple(s.get("overridden", ())), arrays.get("probes"))

@@ -6,7 +6,8 @@ scheduler's SIGTERM, SIGKILL, a full disk) is what it had done:
 - every file is written under a hidden temporary name in the same folder and renamed over its
   final name (`atomic_write`): a reader, or a run killed midway, sees the old file or the new one,
   never part of one. A frame is renamed into place before the ``.pvd`` that lists it, and
-  ``energy.csv``, ``summary.json`` (status "running" until the end) and ``particles.pvd`` are
+  ``energy.csv``, ``probes.csv`` (with probes), ``summary.json`` (status "running" until the end)
+  and ``particles.pvd`` are
   rewritten after every frame, in that order, so they never reference a frame that is not complete
   on disk, and each is at least as new as the next (killed between two renames, energy.csv may
   hold a step more than summary.json, whose t_final is never behind the last frame listed).
@@ -223,8 +224,8 @@ class RunWriter:
     a frame is renamed into place, then ``publish`` rewrites energy.csv, summary.json and last the
     ``.pvd`` that lists the frames (each renamed into place)."""
 
-    def __init__(self, out, stepper):
-        self.out, self.stepper = Path(out), stepper
+    def __init__(self, out, stepper, fields=None):
+        self.out, self.stepper, self.fields = Path(out), stepper, fields      # fields: of the frames
         self.published_t = None           # time of the last frame that the .pvd lists
         self.checkpointed = None          # step of the last checkpoint written
         self.done = False                 # everything but the plots written at the end
@@ -243,13 +244,16 @@ class RunWriter:
         from . import output
         name = f"particles_{index:04d}.vtu"
         self._write(name, lambda: atomic_write(self.out / name,
-                                               lambda p: output.write_particles(p, self.stepper, state)))
+                                               lambda p: output.write_particles(p, self.stepper, state,
+                                                                                self.fields)))
         return name
 
-    def publish(self, entries, history, summary):
+    def publish(self, entries, history, summary, probes=None):
         from . import output
         self._write("energy.csv", lambda: atomic_write(self.out / "energy.csv",
                                                        lambda p: output.write_energy(p, history)))
+        if probes is not None:
+            self._write("probes.csv", lambda: atomic_write(self.out / "probes.csv", probes.write_csv))
         self._write("summary.json", lambda: atomic_write(self.out / "summary.json",
                                                          lambda p: output.write_summary(p, summary)))
         pvd = [(t, name) for t, name, *_ in entries]

@@ -8,19 +8,22 @@ import meshio
 import numpy as np
 
 from . import system
+from .errors import InputError
 
 
-def particle_fields(stepper, state):
+def particle_fields(stepper, state, rows=None):
     """Named particle arrays at a state: F_ij, P_ij, v_i, sigma_ij (Cauchy, 3x3), x_i and the
-    laws' internal variables by name (``eqp``, the equivalent plastic strain, ...)."""
-    d = stepper.d
-    F, p = system.split(state.U, d)
-    P, v = system.split(state.Q, d)
-    sigma = stepper.materials.cauchy(F, stepper.particles.material, state.history)
-    out = _history_fields(stepper.materials, state.history)
+    laws' internal variables by name (``eqp``, the equivalent plastic strain, ...); of the
+    particles ``rows`` only, if given (the probes')."""
+    d, sel = stepper.d, slice(None) if rows is None else rows
+    F, p = system.split(state.U[sel], d)
+    P, v = system.split(state.Q[sel], d)
+    history = None if state.history is None else state.history[sel]
+    sigma = stepper.materials.cauchy(F, stepper.particles.material[sel], history)
+    out = _history_fields(stepper.materials, history)
     for i in range(d):
         out[f"v{i + 1}"] = v[:, i]
-        out[f"x{i + 1}"] = state.x[:, i]
+        out[f"x{i + 1}"] = state.x[sel, i]
         for a in range(d):
             out[f"F{i + 1}{a + 1}"] = F[:, i, a]
             out[f"eps{i + 1}{a + 1}"] = 0.5 * (F[:, i, a] + F[:, a, i]) - (i == a)
@@ -51,22 +54,44 @@ def _tensor9(T):
     return out.reshape(n, 9)
 
 
-def write_particles(path, stepper, state):
-    """Particles at their current positions with U, Q, Cauchy stress and reference position.
+FRAME_FIELDS = ("F", "P", "cauchy", "velocity", "momentum", "X", "volume", "material")
+
+
+def frame_fields(scene, stepper):
+    """The particle arrays a frame holds: ``run.fields`` (a list of names from `FRAME_FIELDS` and
+    the law's history variables, e.g. "eqp"), default all of them; InputError (one line, naming
+    file or --set, key and value, listing the valid names) otherwise. Positions are always written."""
+    valid = FRAME_FIELDS + tuple(stepper.materials.history_names if stepper.materials.n_history else ())
+    value = scene.get("run.fields")
+    if value is None:
+        return valid
+    bad = [f for f in value if not isinstance(f, str) or f not in valid] if isinstance(value, list) else [value]
+    if bad:
+        raise InputError(f"{scene.where('run.fields')} = {value!r}: {bad[0]!r} is not a particle field of the "
+                         f"frames (valid: {', '.join(valid)})")
+    return tuple(dict.fromkeys(value))
+
+
+def write_particles(path, stepper, state, fields=None):
+    """Particles at their current positions with ``fields`` (default every one of `FRAME_FIELDS` and
+    the history variables): U (``F``, ``momentum``), Q (``P``, ``velocity``), ``cauchy`` stress,
+    reference position ``X``, ``volume``, ``material``.
 
     F is embedded in 3D as in the laws (identity out of plane); P is the d x d block, zero padded.
     """
     d = stepper.d
     F, p = system.split(state.U, d)
     P, v = system.split(state.Q, d)
-    sigma = stepper.materials.cauchy(F, stepper.particles.material, state.history)
     n = len(state.x)
-    data = {
-        "F": system.embed(F).reshape(n, 9), "P": _tensor9(P), "cauchy": sigma.reshape(n, 9),
-        "velocity": _pad3(v), "momentum": _pad3(p), "X": _pad3(stepper.particles.X),
-        "volume": stepper.particles.volume, "material": stepper.particles.material.astype(float),
-        **_history_fields(stepper.materials, state.history),
+    make = {
+        "F": lambda: system.embed(F).reshape(n, 9), "P": lambda: _tensor9(P),
+        "cauchy": lambda: stepper.materials.cauchy(F, stepper.particles.material, state.history).reshape(n, 9),
+        "velocity": lambda: _pad3(v), "momentum": lambda: _pad3(p), "X": lambda: _pad3(stepper.particles.X),
+        "volume": lambda: stepper.particles.volume, "material": lambda: stepper.particles.material.astype(float),
     }
+    history = _history_fields(stepper.materials, state.history)
+    names = tuple(make) + tuple(history) if fields is None else fields
+    data = {k: make[k]() if k in make else history[k] for k in names}
     mesh = meshio.Mesh(_pad3(state.x), [("vertex", np.arange(n)[:, None])], point_data=data)
     mesh.write(path)
 
@@ -104,14 +129,17 @@ def write_summary(path, summary):
 
 def read_frame(path, stepper, t, step):
     """The `ParticleState` (without grid dofs) of a frame written by `write_particles`, exactly:
-    VTU keeps the float64 arrays as written. A resumed run's `Result.frames` come from here."""
+    VTU keeps the float64 arrays as written. A resumed run's `Result.frames` come from here; the
+    fields that ``run.fields`` left out of the frames are NaN there."""
     from .scheme import ParticleState
 
     mesh = meshio.read(path)
     d, n, data = stepper.d, len(mesh.points), mesh.point_data
-    block = lambda name: np.asarray(data[name]).reshape(n, 3, 3)[:, :d, :d]      # noqa: E731
-    U = system.join(block("F"), np.asarray(data["momentum"])[:, :d])
-    Q = system.join(block("P"), np.asarray(data["velocity"])[:, :d])
+    nan = np.full((n, 9), np.nan)                  # a field left out by run.fields
+    block = lambda name: np.asarray(data.get(name, nan)).reshape(n, 3, 3)[:, :d, :d]      # noqa: E731
+    vector = lambda name: np.asarray(data.get(name, nan[:, :3]))[:, :d]                     # noqa: E731
+    U = system.join(block("F"), vector("momentum"))
+    Q = system.join(block("P"), vector("velocity"))
     names = stepper.materials.history_names if stepper.materials.n_history else ()
-    history = np.column_stack([data[k] for k in names]) if names else np.zeros((n, 0))
+    history = np.column_stack([data.get(k, nan[:, 0]) for k in names]) if names else np.zeros((n, 0))
     return ParticleState(float(t), U, Q, np.ascontiguousarray(mesh.points[:, :d]), int(step), history=history)

@@ -43,6 +43,25 @@ def energy(result, path=None, ax=None):
     return ax
 
 
+def probes(result, path=None):
+    """The probes' time histories: one panel per field, a curve per point (`skdgmpm.probes`)."""
+    plt = _figure()
+    pr = result.probes
+    fig, axes = plt.subplots(len(pr.fields), 1, figsize=(6, 1.2 + 2.1 * len(pr.fields)), sharex=True, squeeze=False)
+    for ax, f in zip(axes[:, 0], pr.fields):
+        for name, X in zip(pr.names, pr.X):
+            ax.plot(pr.t, pr[name, f], label=f"{name} (X = {', '.join(f'{c:.4g}' for c in X)} m)")
+        ax.set_ylabel(field_label(f))
+    axes[0, 0].legend(fontsize=8)
+    axes[0, 0].set_title(f"{result.scene.name}: probes")
+    axes[-1, 0].set_xlabel("t (s)")
+    if path is not None:
+        fig.tight_layout()
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+    return fig
+
+
 def line_particles(result, axis=0):
     """Particles on the line of smallest transverse coordinate (the bottom line in 2D), sorted."""
     X = result.X

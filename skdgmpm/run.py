@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import checkpoint, guards, outdir, output, parallel
+from . import checkpoint, guards, outdir, output, parallel, probes as gauges
 from .build import build
 from .errors import InputError, InstabilityError, OutputError
 from .exact import relative_errors
@@ -64,6 +64,7 @@ class Result:
     out: Path = None
     exact: object = field(default=None, repr=False)
     startup_s: float = 0.0        # build, initial state and the first step (compiles or loads the kernels)
+    probes: object = field(default=None, repr=False)   # skdgmpm.probes.Probes: the gauges' histories
 
     @property
     def stepper(self):
@@ -210,6 +211,8 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
     check_cfl(disc)
     guards.check_step_count(disc, t_end)
     stepper, state = disc.stepper, disc.initial
+    fields = output.frame_fields(scene, stepper)
+    probes = gauges.from_scene(scene, disc)
     if saved is not None:
         state = saved.state
         checkpoint.restore_stepper(stepper, saved.stepper)
@@ -221,7 +224,8 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
     try:
         with notice:
             return _run(scene, disc, solution, stepper, state, t_end, n_frames, out, progress, max_steps,
-                        on_step, begin, saved=saved, every=every, signals=signals)
+                        on_step, begin, saved=saved, every=every, signals=signals, fields=fields,
+                        probes=probes)
     finally:
         if threads is not None:
             parallel.set_threads(previous)
@@ -263,16 +267,19 @@ HISTORY = ("step", "t", "kinetic", "stored", "dissipated", "total", "external_wo
 
 
 def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, progress, max_steps=None,
-         on_step=None, begin=None, saved=None, every=None, signals=False):
+         on_step=None, begin=None, saved=None, every=None, signals=False, fields=None,
+         probes=None):
     """The time loop. Timing: ``startup_s`` runs from ``begin`` (before the build) to the end of the
     first step, which compiles the kernels or loads them from numba's cache; ``wall_s`` is the
     rest of the loop, so timings compare methods and grids whatever the state of the cache."""
-    writer = None if out is None else outdir.RunWriter(out, stepper)
+    writer = None if out is None else outdir.RunWriter(out, stepper, fields)
     if saved is None:
         history = {k: [] for k in HISTORY}
         entries, next_frame, frame_list = [], 1, []
     else:
         history, entries, next_frame = saved.history, list(saved.entries), saved.next_frame
+        if probes is not None:
+            probes.restore(saved.probes)
         frame_list = [output.read_frame(out / name, stepper, t, step) for t, name, step in entries]
     energy_guard = guards.EnergyGuard(stepper, history)
     energy_every = guards.energy_every(scene, stepper)
@@ -295,15 +302,15 @@ def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, progress, 
 
     def make_result(status, message, errors=None, wall=0.0, startup=0.0):
         return Result(scene, disc, state, {k: np.asarray(v) for k, v in history.items()}, frame_list,
-                      errors or {}, wall, status, message, out, solution, startup)
+                      errors or {}, wall, status, message, out, solution, startup, probes)
 
     def publish(status="running", message="", errors=None, wall=0.0, startup=0.0):
         if writer is not None:
-            writer.publish(entries, history, make_result(status, message, errors, wall, startup).summary())
+            writer.publish(entries, history, make_result(status, message, errors, wall, startup).summary(), probes)
 
     def save_checkpoint(wall, startup):
         writer.checkpoint(lambda: checkpoint.write(out, scene, state, stepper, history, entries, next_frame,
-                                                   n_frames, wall, startup, step_guard.dt0), state.step)
+                                                   n_frames, wall, startup, step_guard.dt0, probes), state.step)
 
     wall0 = 0.0 if saved is None else saved.wall_s
     startup0 = 0.0 if saved is None else saved.startup_s
@@ -311,6 +318,8 @@ def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, progress, 
         if writer is not None:
             writer.grid(disc.grid)
         record(state)
+        if probes is not None:
+            probes.record(stepper, state)
         energy_guard.check(state, history["total"][-1], stepper.external_work)
         snapshot(state)
         publish()
@@ -347,6 +356,9 @@ def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, progress, 
                     state = new
                     if energies is not None:
                         record(state, energies)
+                    if probes is not None and (probes.due(state.step) or state.t >= t_end * (1 - 1e-12)
+                                               or state.step == max_steps):
+                        probes.record(stepper, state)
                     if on_step is not None:
                         on_step(state, disc)
                     if frame_due:
@@ -382,7 +394,7 @@ def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, progress, 
             result = make_result(status, message, compute_errors(disc, state, solution) if status != "interrupted"
                                  else {}, wall, startup)
             if writer is not None:
-                writer.publish(entries, history, result.summary())
+                writer.publish(entries, history, result.summary(), probes)
                 if status != "interrupted":
                     writer.plots(result)
                 if status == "ok":
@@ -400,8 +412,8 @@ def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, progress, 
 
 
 def _plots(result, folder, atomic=None):
-    """energy.png, profile.png (always; against the exact solution when there is one) and eqp.png
-    (a law with plastic flow) into ``folder``; each written
+    """energy.png, profile.png (always; against the exact solution when there is one), probes.png
+    (with [probes]) and eqp.png (a law with plastic flow) into ``folder``; each written
     through ``atomic(path, write)`` if given (`outdir.atomic_write`: never half a PNG)."""
     try:
         from . import plots
@@ -410,6 +422,8 @@ def _plots(result, folder, atomic=None):
     atomic = atomic or (lambda path, write: write(path))
     atomic(folder / "energy.png", lambda p: plots.energy(result, p))
     atomic(folder / "profile.png", lambda p: plots.profile(result, p))     # with the exact solution if any
+    if result.probes is not None:
+        atomic(folder / "probes.png", lambda p: plots.probes(result, p))
     if "eqp" in result.fields():                # a law with plastic flow: where it flowed
         if result.scene.dim == 1:
             atomic(folder / "eqp.png", lambda p: plots.profile(result, p, field="eqp"))

@@ -36,8 +36,9 @@ SCHEMA = {
                "mls_order": int, "backmap": str, "limiter": str, "update": str, "shape": str,
                "time_step": str, "cfl_above_limit": bool, "cfl_guard": str, "geometry": str},
     "run": {"t_end": NUMBER, "frames": int, "checkpoint_every": (int, str), "step_limit": int, "threads": int,
-            "energy_every": int},
+            "energy_every": int, "fields": list},
     "exact": None,
+    "probes": {"points": dict, "fields": list, "every": int},     # gauges: skdgmpm.probes
     "figures": {"times": list, "fields": list},     # paper times and fields of `skdgmpm compare-figures`
 }
 METHODS = ("dgmpm", "rk-dgfem", "ader-dgfem", "ader-dgmpm", "mpm")

@@ -43,6 +43,7 @@ SECTIONS = {
     "bc": "[bc.NAME]: boundary conditions by boundary name (later tables override earlier ones on shared faces)",
     "method": "[method]",
     "run": "[run]",
+    "probes": "[probes]: gauges, time histories of fields at named points (optional; probes.csv, probes.png)",
     "exact": "[exact]: the exact solution the errors are measured against (optional)",
     "figures": "[figures]: what `skdgmpm compare-figures` draws (optional)",
 }
@@ -186,6 +187,17 @@ KEYS = (
         "threads of the compiled passes (also --threads, $SKDGMPM_THREADS); the answers are the same for any count"),
     Key("run.energy_every", "steps", "1 (10 above 20 000 points)", "5",
         "steps between rows of energy.csv and checks of the energy balance (frames and the last step always)"),
+    Key("run.fields", "", "all", '["velocity", "P", "cauchy"]',
+        "the particle arrays of the frames: F, P, cauchy, velocity, momentum, X, volume, material and the law's "
+        "history variables (eqp, ...); positions always; checkpoints keep the whole state"),
+    # ------------------------------------------------------------------------------ probes
+    Key("probes.points", "m", "required in [probes]", "{rear = [0.01, 0.0], mid = [0.005, 0.0]}",
+        "named points in the reference configuration, inside the body; each reads the particle nearest to it "
+        "(DGFEM: the Gauss point), a gauge glued to the material"),
+    Key("probes.fields", "", "v_i and P_ii", '["v1", "P11"]',
+        "the fields recorded, any of `result.fields()` (v1, P11, sigma11, F11, eps11, x1, eqp, ...); columns "
+        "field@point of probes.csv"),
+    Key("probes.every", "steps", "1", "10", "steps between rows (step 0 and the last step always)"),
     # ------------------------------------------------------------------------------ exact
     Key("exact.name", "", "required in [exact]", '"elastic_bar_step"',
         "elastic_bar_step | svk_bar_riemann | elastoplastic_bar_step | standing_wave_2d | mms_axis_aligned | "

@@ -1,4 +1,4 @@
-"""The bad-input table of issue 17: 140 bad or extreme inputs through `skdgmpm run` (and a few
+"""The bad-input table of issue 17: 167 bad or extreme inputs through `skdgmpm run` (and a few
 other commands), each classified as a one-line error with exit 2, a traceback, accepted (exit 0),
 or a health stop (exit 3). Run from anywhere: python tests/bad_input_table.py (a few minutes)."""
 import contextlib, io, os, sys, tempfile, traceback, warnings
@@ -28,15 +28,23 @@ bad_sets = ["grid.cellz=3", 'grid.cells="many"', "grid.cells=0", "grid.cells=-5"
  'particles.file="nope.txt"', 'initial.velocity=["a"]', "initial.velocity=[1.0, 2.0]", "initial.velocity=[nan]", 'initial.velocity=["1"]',
  "initial.F=[[-1.0]]", "initial.F=[[1e300]]", "initial.F=[[0.0]]", "initial.velocity=[1e300]", "initial.exact=3",
  "exact.load=nowhere", "exact.load=right", 'exact.name="nope"', "grid", "grid.cells.x=3", "=3", "title=3", "description=[1]",
- "method.cfl=1.5", 'method.name="mpm"', "boundaries.b.box=3", "body.box={x=[10,20]}", "regions=[3]"]
+ "method.cfl=1.5", 'method.name="mpm"', "boundaries.b.box=3", "body.box={x=[10,20]}", "regions=[3]",
+ # outputs a user chooses: run.fields and [probes]
+ 'run.fields=["stress"]', 'run.fields="P"', "run.fields=[1]", 'run.fields=["v1"]', "run.fields=[[]]", "run.energy_every=0",
+ "probes=3", "probes.points={a=[7.0]}", "probes.points={a=[-0.1]}", "probes.points={a=[1.0,2.0]}", 'probes.points={a=["x"]}',
+ "probes.points={a=[nan]}", "probes.points={a=[inf]}", "probes.points={a=true}", "probes.points={}", "probes.points=[1.0]",
+ 'probes.points={a="mid"}', 'probes.fields=["v9"]', "probes.fields=[]", 'probes.fields="v1"', "probes.every=0", "probes.every=-2",
+ "probes.every=1.5", "probes.where=1"]
 for s in bad_sets:
-    add(f"--set {s}", ["run", "bar_elastic_1d", "--out", base / "o", *T, "--set", s])
+    gauge = ["--set", "probes.points={a=[1.0]}"] if s.startswith(("probes.fields", "probes.every", "probes.where")) else []
+    add(f"--set {s}", ["run", "bar_elastic_1d", "--out", base / "o", *T, *gauge, "--set", s])
 two_d = ["grid.cells=[0,3]", "grid.size=[1]", "grid.size=[-1,1]", 'method.transverse="abc"', "method.cfl=1.9",
-         'method.name="ader-dgmpm"', 'method.backmap="bogus"']
+         'method.name="ader-dgmpm"', 'method.backmap="bogus"', "probes.points={a=[4.5,1.0]}", "probes.points={a=[1.0]}",
+         'probes.points={a=[1.0,1.0]} && probes.fields=["P33"]']
 for s in two_d:
     extra = ['--set', 'method.name="ader-dgmpm"'] if "backmap" in s else []
     add(f"2D --set {s}", ["run", "partial_impact_2d", "--out", base / "o2", "--set", "grid.cells=[4,4]", "--set", "run.t_end=1e-6",
-                          "--quiet", *extra, "--set", s])
+                          "--quiet", *extra, *SET(*s.split(" && "))])
 # files
 (base / "latin1.toml").write_bytes('title = "à"\n'.encode("latin-1")); add("non-UTF-8 scene", ["run", base / "latin1.toml"])
 (base / "bad.toml").write_text("dim = \n"); add("invalid TOML", ["run", base / "bad.toml"])
@@ -65,7 +73,7 @@ mesh_case("mesh lines only", P, [[0,1],[1,2]], kind="line")
 mesh_case("mesh triangles", P, [[0,1,4],[1,2,5]], kind="triangle")
 mesh_case("mesh garbage", None, None, raw=bytes(np.random.default_rng(0).integers(0, 256, 4000, dtype=np.uint8)))
 mesh_case("mesh empty file", None, None, raw=b"")
-mesh_case("mesh truncated", None, None, raw=ROOT / "cases" / "plate_4x3.msh".read_bytes()[:3000])
+mesh_case("mesh truncated", None, None, raw=(ROOT / "cases" / "plate_4x3.msh").read_bytes()[:3000])
 # out and resume
 (base / "afile").write_text("x")
 add("--out under a file", ["run", "bar_elastic_1d", "--out", base / "afile" / "o", *T])

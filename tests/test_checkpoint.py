@@ -21,6 +21,8 @@ from skdgmpm.run import resume, run
 from skdgmpm.scene import load_scene
 
 TIMING = ("wall_s", "startup_s", "wall_per_step_s")
+# gauges every 4th step: probes.csv must come out of a resumed run byte for byte too
+PROBES = ["probes.points={a = [1.0], b = [4.5]}", 'probes.fields=["v1", "P11", "sigma11"]', "probes.every=4"]
 # scene, overrides: small runs of 30 to 60 steps, 6 frames
 CASES = {
     "dgmpm": ("bar_elastic_1d", ["grid.cells=30", "run.t_end=4e-4", "run.frames=6",
@@ -34,6 +36,8 @@ CASES = {
                                                'method.name="ader-dgmpm"', "method.order=1",
                                                "particles.per_cell=[0.25, 0.75]", "method.cfl=0.5"]),
 }
+CASES = {name: (scene, overrides + PROBES + (['probes.fields=["v1", "P11", "eqp"]'] if name.endswith("j2") else []))
+         for name, (scene, overrides) in CASES.items()}
 
 
 def same_outputs(a, b):
@@ -82,6 +86,8 @@ def test_an_interrupted_run_resumed_is_bit_identical(tmp_path, case):
         assert whole.state.history.shape[1] > 0 and whole.state.history[:, 0].max() > 0     # it flowed
     if case.startswith("ader"):
         assert again.summary()["picard"] == whole.summary()["picard"]
+    assert (tmp_path / "cut" / "probes.csv").is_file()
+    assert np.array_equal(again.probes.table(), whole.probes.table())
 
 
 def test_a_periodic_checkpoint_survives_a_crash(tmp_path):

@@ -54,6 +54,12 @@ def consistent(out, status=None):
     # written in this order, each at least as new as the next: energy.csv, summary.json, .pvd
     assert int(rows[-1][0]) >= summary["steps"]
     assert float(entries[-1].get("timestep")) <= summary["t_final"] * (1 + 1e-8)
+    if (out / "probes.csv").exists():              # written between energy.csv and summary.json
+        with open(out / "probes.csv") as fh:
+            probes = list(csv.reader(fh))
+        assert probes[0][0] == "t" and all(len(r) == len(probes[0]) for r in probes)
+        t = [float(r[0]) for r in probes[1:]]
+        assert t == sorted(t) and t[-1] >= summary["t_final"] * (1 - 1e-8)     # rows every step
     assert not [p.name for p in out.iterdir() if not p.name.startswith(".") and p.suffix not in
                 (".vtu", ".pvd", ".csv", ".json", ".png", ".npz")]
     return entries, summary
@@ -63,9 +69,9 @@ def test_frames_go_to_a_hidden_name_then_are_renamed(tmp_path, monkeypatch):
     written = []
     real = output.write_particles
 
-    def spy(path, stepper, state):
+    def spy(path, stepper, state, *fields):
         written.append(Path(path))
-        real(path, stepper, state)
+        real(path, stepper, state, *fields)
 
     monkeypatch.setattr(output, "write_particles", spy)
     out = tmp_path / "out"
@@ -83,7 +89,7 @@ def test_the_folder_is_consistent_after_every_step(tmp_path):
         entries, summary = consistent(out, "running")
         seen.append(len(entries))
 
-    r = run("bar_elastic_1d", TINY, out=out, progress=False, on_step=look)
+    r = run("bar_elastic_1d", TINY + ["probes.points={a = [1.0]}"], out=out, progress=False, on_step=look)
     assert r.status == "ok" and len(seen) == r.state.step + 1 and seen[-1] > 5
     entries, _ = consistent(out, "ok")
     assert len(entries) == len(r.frames)
