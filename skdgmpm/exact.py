@@ -471,12 +471,63 @@ class SquareInitialStrain:
         return {"F11": 1 + f, "F12": zero, "F21": zero, "F22": 1 - f, "v1": zero, "v2": zero}
 
 
+@dataclass(frozen=True, kw_only=True)
+class SquareShearMode:
+    """The L23 §5.1 convergence square read consistently (METHOD.md, note after §9): the unit
+    square with symmetry on the left and top faces and free right and bottom faces holds the
+    standing shear mode
+
+        u = U0 (sin(pi X/2) sin(pi Y/2), cos(pi X/2) cos(pi Y/2)) cos(omega t),
+        omega = pi sqrt(mu / (2 rho)),
+
+    whose strain at t = 0 is the paper's eps = f (e1 (x) e1 - e2 (x) e2), f = U0 pi/2 cos(pi X/2)
+    sin(pi Y/2) (tr eps = 0, so P = 2 mu eps with the linear law, div P = -mu pi^2/2 u). Every
+    face is compatible with it: u1 = P21 = 0 on X = 0, u2 = P12 = 0 on Y = 1, P11 = P21 = 0 on
+    X = 1, P22 = P12 = 0 on Y = 0. F = I + grad u holds the rotation W (F12 = -F21)."""
+
+    E: float
+    nu: float
+    rho: float
+    amplitude: float = 5e-4
+
+    def __post_init__(self):
+        for key in ("E", "rho"):
+            _check(type(self), key, getattr(self, key), lambda x: x > 0, "a number > 0")
+        _check(type(self), "nu", self.nu, lambda x: -1 < x < 0.5, "a number in (-1, 0.5)")
+
+    @property
+    def mu(self):
+        return self.E / (2 * (1 + self.nu))
+
+    @property
+    def omega(self):
+        return math.pi * math.sqrt(self.mu / (2 * self.rho))
+
+    def fields(self, X, t):
+        X = np.asarray(X, dtype=float)
+        if X.ndim != 2 or X.shape[1] != 2:
+            raise InputError(f"SquareShearMode: X must have shape (n, 2), got {X.shape}")
+        a, k, w, t = self.amplitude, math.pi / 2, self.omega, _time(t)
+        cx, sx = np.cos(k * X[:, 0]), np.sin(k * X[:, 0])
+        cy, sy = np.cos(k * X[:, 1]), np.sin(k * X[:, 1])
+        c, s = math.cos(w * t), math.sin(w * t)
+        f = a * k * cx * sy * c                            # eps11 = -eps22
+        g = a * k * sx * cy * c                            # F12 = -F21 (the rotation)
+        zero = np.zeros(len(X))
+        return {
+            "F11": 1 + f, "F12": g, "F21": -g, "F22": 1 - f, "eps11": f, "eps12": zero, "eps22": -f,
+            "P11": 2 * self.mu * f, "P22": -2 * self.mu * f, "P12": zero, "P21": zero,
+            "v1": -a * w * sx * sy * s, "v2": -a * w * cx * cy * s,
+            "u1": a * sx * sy * c, "u2": a * cx * cy * c,
+        }
+
+
 INITIAL = {"square_initial_strain": SquareInitialStrain}
 
 
 EXACT = {"elastic_bar_step": ElasticBarStep, "svk_bar_riemann": SVKBarRiemann,
          "elastoplastic_bar_step": ElastoplasticBarStep,
-         "standing_wave_2d": StandingWave2D, **MANUFACTURED}     # manufactured: built from the scene's material
+         "standing_wave_2d": StandingWave2D, "square_shear_mode": SquareShearMode, **MANUFACTURED}     # manufactured: built from the scene's material
 
 
 def make_exact(name, **params):

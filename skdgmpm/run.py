@@ -186,8 +186,17 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
         scene = load_scene(scene, overrides)
     elif overrides:
         scene = scene.with_overrides(overrides)
-    t_end = scene.get("run.t_end")
-    if not (isinstance(t_end, (int, float)) and not isinstance(t_end, bool) and 0 < t_end < np.inf):
+    t_end, steps = scene.get("run.t_end"), scene.get("run.steps")
+    if steps is not None and t_end is not None and "run.t_end" in scene.overridden:
+        steps = None                        # --set run.t_end fixes the time instead
+    if steps is not None:
+        if t_end is not None:
+            raise InputError(f"{scene.where('run.steps')} = {steps!r} and {scene.where('run.t_end')} = {t_end!r}: "
+                             "give one of them (run.steps sets the end time from the first time step)")
+        if not (steps == "cells" or (isinstance(steps, int) and not isinstance(steps, bool) and steps >= 1)):
+            raise InputError(f"{scene.where('run.steps')} = {steps!r} must be a whole number of steps >= 1 or "
+                             "\"cells\" (as many steps as cells along X, L23 §5.1's N_t = N_e)")
+    elif not (isinstance(t_end, (int, float)) and not isinstance(t_end, bool) and 0 < t_end < np.inf):
         raise InputError(f"{scene.where('run.t_end')} = {t_end!r} must be a time > 0 (s)")
     if saved is None:
         n_frames = int(frames) if frames is not None else scene.get("run.frames", 20)
@@ -207,6 +216,8 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
               if (progress if notice is None else notice) else nullcontext())
     with notice:                          # a line on stderr if the kernels are not in the cache
         disc = build(scene)
+    if steps is not None:                 # the end time of that many first time steps [L23 eq 67]
+        scene, t_end = _end_of_steps(scene, disc, steps)
     solution = exact_solution(scene)
     check_cfl(disc)
     guards.check_step_count(disc, t_end)
@@ -231,6 +242,20 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
             parallel.set_threads(previous)
         if folder is not None:
             folder.release()
+
+
+def _end_of_steps(scene, disc, steps):
+    """The scene with ``run.t_end`` = steps x the first time step in place of ``run.steps``
+    ("cells": as many steps as cells along X), and that end time."""
+    if steps == "cells":
+        cells = scene.get("grid.cells")
+        if cells is None or scene.get("grid.mesh") is not None:
+            raise InputError(f"{scene.where('run.steps')} = 'cells' needs grid.cells (a structured grid)")
+        steps = int(cells if isinstance(cells, int) else cells[0])
+    t_end = steps * float(disc.stepper.time_step(disc.initial))
+    scene = scene.with_overrides([f"run.t_end={t_end!r}"])
+    del scene.data["run"]["steps"]
+    return scene, t_end
 
 
 def resume(folder, progress=True, signals=None, notice=None):

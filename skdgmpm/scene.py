@@ -35,7 +35,7 @@ SCHEMA = {
     "method": {"name": str, "integrator": str, "transverse": str, "cfl": NUMBER, "order": int,
                "mls_order": int, "backmap": str, "limiter": str, "update": str, "shape": str,
                "time_step": str, "cfl_above_limit": bool, "cfl_guard": str, "geometry": str},
-    "run": {"t_end": NUMBER, "frames": int, "checkpoint_every": (int, str), "step_limit": int, "threads": int,
+    "run": {"t_end": NUMBER, "frames": int, "checkpoint_every": (int, str), "step_limit": int, "threads": int, "steps": (int, str),
             "energy_every": int, "fields": list},
     "exact": None,
     "probes": {"points": dict, "fields": list, "every": int},     # gauges: skdgmpm.probes
@@ -260,7 +260,7 @@ def exact_solution(scene):
             raise InputError(f"{scene.where('material')}: {str(exc).removeprefix('material: ')}") from None
         if name == "mms_ring":
             params.update(scene.get("body.ring") or {})  # the ring that holds the particles
-    if name in ("svk_bar_riemann", "standing_wave_2d", "elastoplastic_bar_step"):
+    if name in ("svk_bar_riemann", "standing_wave_2d", "elastoplastic_bar_step", "square_shear_mode"):
         params["nu"] = mat.get("nu")
     if name == "elastoplastic_bar_step":                 # yield and hardening: the law's, or [exact]'s
         params.update({k: mat[k] for k in ("sigma_y", "H") if k in mat})

@@ -177,7 +177,10 @@ KEYS = (
         "MPM: updated (particles move over the grid) or linearised (they stay at their reference "
         "positions: small displacements, R18 §7.1)", methods=("mpm",)),
     # ------------------------------------------------------------------------------ run
-    Key("run.t_end", "s", "required", "1.0e-3", "end time"),
+    Key("run.t_end", "s", "required (or run.steps)", "1.0e-3", "end time; given with --set it replaces the file's run.steps"),
+    Key("run.steps", "", "none", '"cells"',
+        "instead of run.t_end: the end time of that many first time steps; \"cells\": as many as cells along X "
+        "(L23 §5.1's N_t = N_e, the step of eq 67)"),
     Key("run.frames", "", "20", "12", "frames written (particles_NNNN.vtu) and kept by run() after t = 0"),
     Key("run.checkpoint_every", "steps or time", '"10 min"', '"30 s"',
         "how often checkpoint.npz is written: a number of steps (500) or a wall time ('30 s', '10 min', '2 h'); "
@@ -200,8 +203,8 @@ KEYS = (
     Key("probes.every", "steps", "1", "10", "steps between rows (step 0 and the last step always)"),
     # ------------------------------------------------------------------------------ exact
     Key("exact.name", "", "required in [exact]", '"elastic_bar_step"',
-        "elastic_bar_step | svk_bar_riemann | elastoplastic_bar_step | standing_wave_2d | mms_axis_aligned | "
-        "mms_ring (E, nu, rho and the law are the scene's [material])", type="string"),
+        "elastic_bar_step | svk_bar_riemann | elastoplastic_bar_step | standing_wave_2d | square_shear_mode | "
+        "mms_axis_aligned | mms_ring (E, nu, rho and the law are the scene's [material])", type="string"),
     Key("exact.load", "", "none", '"left"',
         "the [bc.NAME] of kind traction or free whose value drives a bar solution", type="string", dims=(1,)),
     Key("exact.traction", "Pa", "from load", "-1.0e9", "bar solutions: P11 at the loaded end (negative: compression), if not given by load",
@@ -213,7 +216,8 @@ KEYS = (
     Key("exact.H", "Pa", "material.H", "1.0e10", "elastoplastic_bar_step: hardening modulus", type="number",
         dims=(1,)),
     Key("exact.amplitude", "m", "per solution", "1.0e-4",
-        "standing_wave_2d, mms_axis_aligned (0.1), mms_ring (0.1 R_O): displacement amplitude", type="number",
+        "standing_wave_2d, square_shear_mode (U0), mms_axis_aligned (0.1), mms_ring (0.1 R_O): displacement "
+        "amplitude", type="number",
         dims=(2,)),
     Key("exact.modes", "", "[1, 1]", "[2, 1]", "standing_wave_2d: mode numbers in x and y", type="list",
         dims=(2,)),

@@ -86,7 +86,7 @@ def test_convergence_square_methods_agree_at_each_grid():
     factor 1.5 of each other on every grid ("all convergence curves are very close")."""
     from skdgmpm.study import convergence
 
-    rows = convergence("convergence_square", ["rk-dgfem/rk2", "ader-dgfem", "ader-dgmpm"], [1], [3, 6],
+    rows = convergence("convergence_square_printed", ["rk-dgfem/rk2", "ader-dgfem", "ader-dgmpm"], [1], [3, 6],
                        overrides=["run.t_end=5e-5"], fields=["eps11", "P11", "v1"], progress=False,
                        reference="rk-dgfem/rk4:2:12")
     for cells in (3, 6):

@@ -158,8 +158,9 @@ def test_svk_zero_load_is_rest():
 
 # ---------------------------------------------------------------- registry, errors, norms
 def test_registry():
-    assert set(EXACT) == {"elastic_bar_step", "svk_bar_riemann", "standing_wave_2d",
+    assert set(EXACT) == {"elastic_bar_step", "svk_bar_riemann", "standing_wave_2d", "square_shear_mode",
                           "elastoplastic_bar_step", "mms_axis_aligned", "mms_ring"}     # the last two: tests/test_manufactured.py
+    # square_shear_mode: tests/test_convergence_square.py
     b = make_exact("elastic_bar_step", length=6.0, traction=-T, **STEEL)
     assert isinstance(b, ElasticBarStep)
     with pytest.raises(AttributeError):

@@ -55,6 +55,7 @@ CASES = {
     "standing_wave_2d/ader-dgfem-3": ("standing_wave_2d", ['method.name="ader-dgfem"', "method.order=3",
                                                            "grid.cells=[4, 4]", "method.cfl=0.4"]),
     "convergence_square/ader-dgmpm-2": ("convergence_square", [*ADER_DGMPM_P2, "grid.cells=[5, 5]"]),
+    "convergence_square_printed/ader-dgmpm-1": ("convergence_square_printed", ["grid.cells=[5, 5]"]),
     "mms_axis_aligned_2d/dgmpm": ("mms_axis_aligned_2d", ["grid.cells=[8, 8]"]),
     "mms_axis_aligned_2d/mpm-cd-cpgimp": ("mms_axis_aligned_2d", ["grid.cells=[8, 8]", 'method.name="mpm"',
                                                                   'method.update="cd"']),

@@ -17,7 +17,7 @@ from skdgmpm.stability import critical_cfl
 C_BAR = np.sqrt(2e11 / 7800.0)            # m/s, elastic bar wave speed
 TESTED = {"bar_elastic_1d", "bar_svk_1d", "bar_svk_tension_1d", "plane_wave_svk_2d",
           "partial_impact_2d", "plate_impact_neohookean_2d", "standing_wave_2d",
-          "convergence_square",        # convergence_square: tests/test_ader.py
+          "convergence_square", "convergence_square_printed",   # tests/test_convergence_square.py, test_ader.py
           "lasat_2d", "multiholed_cell_2d",    # the hard scenes: tests/test_hard_scenes.py
           "mms_axis_aligned_2d", "mms_ring_2d",  # WG08 manufactured; every method: tests/test_manufactured.py
           "bar_elastoplastic_1d",      # every method against the exact two-wave solution: tests/test_laws_every_method.py
