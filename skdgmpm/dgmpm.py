@@ -27,14 +27,13 @@ import scipy.sparse as sp
 
 from skdgmpm.materials.points import law_table
 
-from . import system
-from . import parallel
-from .dgmpm_kernels import (boundary_edge_corrections, boundary_pass, boundary_sides, edge_corrections, euler_update,
-                            integrate_faces, interior_pass)
+from . import parallel, system
+from .dgmpm_kernels import (boundary_edge_corrections, boundary_pass, boundary_sides, euler_update, integrate_faces,
+                            interior_pass)
 from .errors import InputError
 from .faces import interior_faces
 from .integrators import INTEGRATORS
-from .quadrature import ParticleMap, VolumeOperators, interpolation_matrix, particle_basis
+from .quadrature import ParticleMap, VolumeOperators, gather_rows, interpolation_matrix, particle_basis
 from .riemann import _not_hyperbolic
 from .scheme import GodunovScheme, GridState, cell_values, stage
 
@@ -163,9 +162,8 @@ class DGMPM(GodunovScheme):
         if bad >= 0:
             _not_hyperbolic(bad)
         if ctu:
-            parts = G.reshape(-1, nc)
-            parallel.rows(len(f), lambda lo, hi: edge_corrections(parallel.csr_rows(self.to_interior, lo, hi),
-                                                                  parts, corr[lo:hi]))
+            parts = G.reshape(-1, nc)               # each edge: sum_k sign_k G[part_k], in face order
+            gather_rows(self.to_interior, parts, corr)
             boundary_edge_corrections(self.to_boundary, parts, corr_bnd)
         return flux, corr, corr_bnd
 
@@ -228,9 +226,9 @@ class DGMPM(GodunovScheme):
 
     def _edge_gathers(self, sides):
         """CSR rows, one per interior edge, of the parts (rows of `interior_pass`'s G flattened,
-        4 f + 2 side + e) that it receives and their signs; and per boundary edge, the parts and
-        the opposite edge's parts (`edge_corrections`). Within a row the parts are in the order a
-        loop over the faces meets them."""
+        4 f + 2 side + e) that it receives and their signs (`quadrature.gather_rows`); and per
+        boundary edge, the parts and the opposite edge's parts (`boundary_edge_corrections`).
+        Within a row the parts are in the order a loop over the faces meets them."""
         nf = len(self.interior)
         part = 4 * np.arange(nf)[None, :] + np.arange(2)[:, None]            # (2 edges, nf)
         rows = {"interior": ([], [], []), "boundary": ([], [], [])}

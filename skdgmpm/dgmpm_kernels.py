@@ -5,7 +5,8 @@ in scipy's order), evaluates each side's tangent with the law's point function
 (`skdgmpm.materials.points`), solves the linearised Riemann problem (`skdgmpm.equations`)
 and, for CTU, splits each fluctuation on the characteristic basis of the two edges of
 the cell it enters as soon as it is known, writing the two parts beside the face's flux; each
-edge then gathers the parts it receives (`edge_corrections`), in face order. Every pass writes
+edge then gathers the parts it receives (`DGMPM.interface_flux`: a CSR row gather, signs as
+weights), in face order. Every pass writes
 its own rows only, so that it runs in chunks on several threads with the same bits
 (`skdgmpm.parallel`). The corrections are proportional to Delta t (G = -dt / (2 h) B+ A dU): the
 interior pass stores them per unit Delta t, so that a repeated attempt of the CFL guard reuses
@@ -85,8 +86,8 @@ def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, p
                   flux, G):
     """Godunov flux of every interior face into flux (nf, nc) and, for ``ctu`` (2D), the
     transverse parts per unit Delta t of both sides' fluctuations into G (nf, 4, nc): side L's
-    for its cell's two edges in G[:, 0:2], side R's in G[:, 2:4] (summed on the edges by
-    `edge_corrections`: each face writes its own rows only). Returns the first face whose
+    for its cell's two edges in G[:, 0:2], side R's in G[:, 2:4] (summed on the edges by a row
+    gather, `quadrature.gather_rows`: each face writes its own rows only). Returns the first face whose
     acoustic tensor is not positive definite, or -1."""
     return _interior_pass(N.shape[1])(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
                                       ctu, topo_L, topo_R, flux, G)
@@ -124,31 +125,6 @@ def _interior_pass(d):                  # a literal d: the (d, d) loops unrolled
                     return f
         return -1
     return interior_pass
-
-
-def edge_corrections(to_interior, G, corr):
-    """The transverse corrections each interior edge receives, gathered edge by edge from the
-    parts G (n_parts, nc) (`interior_pass`'s (nf, 4, nc) flattened): corr[j] = sum_k s_k G[part_k],
-    CSR rows ``to_interior`` (indptr, parts, signs s), terms in face order as a serial scatter
-    over the faces would add them."""
-    _edge_corrections(G.shape[1])(to_interior, G, corr)
-
-
-@kernel_factory
-def _edge_corrections(nc):              # a literal width: the loops unrolled
-    def edge_corrections(to_interior, G, corr):
-        indptr, parts, signs = to_interior
-        s = scratch((nc,))
-        for j in range(len(indptr) - 1):
-            for c in range(nc):
-                s[c] = 0.0
-            for k in range(indptr[j], indptr[j + 1]):
-                p, sign = parts[k], signs[k]
-                for c in range(nc):
-                    s[c] += sign * G[p, c]
-            for c in range(nc):
-                corr[j, c] = s[c]
-    return edge_corrections
 
 
 @njit(cache=True, nogil=True)

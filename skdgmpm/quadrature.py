@@ -143,8 +143,7 @@ class ParticleMap:
         """S nodal for nodal values (n_dofs, nc): one compiled pass, each row summed in CSR order
         as scipy's product does."""
         out = np.empty((self.S.shape[0], nodal.shape[1]))
-        S, kernel = self.S, _interpolate(nodal.shape[1])
-        parallel.rows(len(out), lambda lo, hi: kernel(S.indptr[lo:hi + 1], S.indices, S.data, nodal, out[lo:hi]))
+        gather_rows((self.S.indptr, self.S.indices, self.S.data), nodal, out)
         return out
 
 
@@ -172,6 +171,14 @@ def _project_state(d):                  # literal widths: the loops unrolled
             for c in range(dd, nc):
                 Q_n[r, c] = u[c] / rho[r]
     return project_state
+
+
+def gather_rows(matrix, values, out):
+    """out = A values for a CSR triple A = (indptr, indices, data) and values (n, nc): each row's
+    products summed in CSR order (as scipy's product does), rows in parallel chunks."""
+    indptr, indices, data = matrix
+    kernel = _interpolate(values.shape[1])
+    parallel.rows(len(out), lambda lo, hi: kernel(indptr[lo:hi + 1], indices, data, values, out[lo:hi]))
 
 
 @kernel_factory

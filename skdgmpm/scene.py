@@ -35,7 +35,8 @@ SCHEMA = {
     "method": {"name": str, "integrator": str, "transverse": str, "cfl": NUMBER, "order": int,
                "mls_order": int, "backmap": str, "limiter": str, "update": str, "shape": str,
                "time_step": str, "cfl_above_limit": bool, "cfl_guard": str, "geometry": str},
-    "run": {"t_end": NUMBER, "frames": int, "checkpoint_every": (int, str), "step_limit": int, "threads": int, "steps": (int, str),
+    "run": {"t_end": NUMBER, "frames": int, "checkpoint_every": (int, str), "step_limit": int, "threads": int,
+            "steps": (int, str),
             "energy_every": int, "fields": list},
     "exact": None,
     "probes": {"points": dict, "fields": list, "every": int},     # gauges: skdgmpm.probes
