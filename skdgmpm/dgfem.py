@@ -20,7 +20,6 @@ from skfem import (CellBasis, ElementDG, ElementLineP1, ElementLineP2, ElementQu
 
 from . import forms, integrators, parallel, system
 from .elements import ElementLineLagrange
-from .equations import add_flux
 from .errors import InputError
 from .faces import interior_faces
 from .kernel_cache import kernel_factory
@@ -61,17 +60,6 @@ def _apply_blocks_n(blocks, cell_dofs, R, out, nb, nc):
                 for m in range(nb):
                     s += blocks[c, k, m] * R[cell_dofs[c, m], j]
                 out[cell_dofs[c, k], j] = s
-
-
-@kernel_factory
-def _volume_term(d):
-    def volume_term(indptr, indices, data, Q, alpha, out):
-        """out += D^T F_alpha(Q) for one CSR D (n_points, n_dofs) of weighted derivatives
-        dPhi/dX_alpha, scattered in point order as scipy's D.T @ F is (no flux array is built)."""
-        for q in range(len(indptr) - 1):
-            for k in range(indptr[q], indptr[q + 1]):
-                add_flux(Q[q], alpha, data[k], out[indices[k]], d)
-    return volume_term
 
 
 def dg_element(d, order):
@@ -138,6 +126,9 @@ class DGFEM(GodunovScheme):
         self._phi, self._grad = phi, grad
         self.B = _point_matrix(basis, phi)
         self.D = tuple(_point_matrix(basis, grad[:, a] * basis.dx[None]) for a in range(d))
+        # sum_q D[q, i] F_alpha(Q_q) as a gather over each dof's points (`system.volume_flux`: F_alpha
+        # is linear, each row summed in point order): the same sums as D^T F, rows in parallel
+        self.K_points = system.Stiffness(tuple(D.T.tocsr() for D in self.D))
         # the consistent mass is block diagonal (broken space): invert each cell's block once
         self.cell_dofs = np.ascontiguousarray(basis.element_dofs.T)                     # (nel, nb)
         dof_cell = np.empty(basis.N, dtype=np.int64)
@@ -204,13 +195,7 @@ class DGFEM(GodunovScheme):
     @stage("volume_flux")
     def volume_flux_points(self, Q):
         """The volume term from Q at the Gauss points (n_points, ncomp)."""
-        R = np.zeros((self.n_dofs, Q.shape[1]))
-        term = np.empty_like(R)
-        for a, D in enumerate(self.D):
-            term[...] = 0.0
-            _volume_term(self.d)(D.indptr, D.indices, D.data, Q, a, term)
-            R += term
-        return R
+        return system.volume_flux(Q, self.K_points)
 
     def source_integral(self, S):
         """int Phi S from values S (n_points, nc) at the Gauss points (Gauss quadrature)."""
