@@ -28,8 +28,8 @@ import scipy.sparse as sp
 from skdgmpm.materials.points import law_table
 
 from . import parallel, system
-from .dgmpm_kernels import (boundary_edge_corrections, boundary_pass, boundary_sides, euler_update, integrate_faces,
-                            interior_pass)
+from .dgmpm_kernels import (boundary_edge_corrections, boundary_pass, boundary_sides, cell_records, euler_update,
+                            integrate_faces, interior_pass, record_width)
 from .errors import InputError
 from .faces import interior_faces
 from .integrators import INTEGRATORS
@@ -91,6 +91,7 @@ class DGMPM(GodunovScheme):
         self.h_min = float(g.cell_sizes().min())
         self.interior = interior_faces(g.submesh, g.element)
         self._setup_boundary(g.element)
+        self._setup_cell_faces(basis)
         self._setup_transverse()
         self.laws = law_table(self.materials.materials)          # the compiled point laws
         self.traces = {"L": _csr(self.interior.T_L), "R": _csr(self.interior.T_R),
@@ -101,6 +102,24 @@ class DGMPM(GodunovScheme):
         self.inv_M = 1.0 / ops.lumped
 
     # ---------------------------------------------------------------- set-up
+    def _setup_cell_faces(self, basis):
+        """What `cell_records` and the face pass read: each cell's nodes (n_cells, nodes), the local
+        index of each interior face in its two cells, and each cell's face directions (n_cells,
+        slots, d): a cell's local faces k and k + n/2 are opposite; where every cell's opposite faces
+        are parallel (bit for bit: a structured grid) they share an impedance (A_n is quadratic in n),
+        so the record keeps n/2 directions, otherwise one per face."""
+        m, f = self.grid.submesh, self.interior
+        self.cell_dofs = np.ascontiguousarray(basis.element_dofs.T)
+        self.local_face = tuple(np.argmax(m.t2f[:, cells] == f.facets[None, :], axis=0).astype(np.int8)
+                                for cells in (f.cell_L, f.cell_R))
+        normal = np.zeros((m.nfacets, self.d))
+        normal[f.facets], normal[self.boundary.facets] = f.normal, self.boundary.normal
+        normals = normal[m.t2f.T]                                   # (n_cells, faces, d)
+        half = normals.shape[1] // 2
+        opposite = normals[:, half:]
+        parallel_pairs = np.all((opposite == normals[:, :half]) | (opposite == -normals[:, :half]))
+        self.cell_normals = np.ascontiguousarray(normals[:, :half] if parallel_pairs else normals)
+
     def _setup_transverse(self):
         """CTU set-up: the boundary faces' `side_topology`; for the interior faces' sides, only
         what the face pass reads, (h, normals (nf, 2, 2)) (face-major: a chunk of faces is a
@@ -153,11 +172,21 @@ class DGMPM(GodunovScheme):
         (h_L, n_L), (h_R, n_R) = self.split_topology["L"], self.split_topology["R"]
         csr = parallel.csr_rows
 
+        dofs, normals = self.cell_dofs, self.cell_normals
+        n_cells, (k_L, k_R) = len(dofs), self.local_face
+        rec = np.empty((n_cells, record_width(self.d, normals.shape[1])))
+        state = np.empty(n_cells, dtype=np.int8)
+        parallel.rows(n_cells, lambda lo, hi: cell_records(
+            dofs[lo:hi], grid_state.U, grid_state.Q, rho, self.cell_material[lo:hi], *laws, normals[lo:hi], rec[lo:hi],
+            state[lo:hi]))
+        recorded = bool(np.all(state != 0))         # one particle per cell: the faces read no trace
+
         def faces(lo, hi):
             sl = slice(lo, hi) if ctu else slice(0, 0)
             return interior_pass(csr(T_L, lo, hi), csr(T_R, lo, hi), grid_state.U, grid_state.Q, rho,
                                  f.normal[lo:hi], f.cell_L[lo:hi], f.cell_R[lo:hi], self.cell_material, *laws,
-                                 ctu, (h_L[sl], n_L[sl]), (h_R[sl], n_R[sl]), flux[lo:hi], G[sl])
+                                 (rec, state, normals, k_L[lo:hi], k_R[lo:hi], recorded), ctu, (h_L[sl], n_L[sl]),
+                                 (h_R[sl], n_R[sl]), flux[lo:hi], G[sl])
         bad = parallel.first_bad(len(f), faces)
         if bad >= 0:
             _not_hyperbolic(bad)

@@ -1,8 +1,16 @@
 """Compiled face passes of first-order DGMPM: one loop over a face set per right-hand side.
 
-For every face the pass gathers the side states through the trace operators (CSR rows, summed
-in scipy's order), evaluates each side's tangent with the law's point function
-(`skdgmpm.materials.points`), solves the linearised Riemann problem (`skdgmpm.equations`)
+Each side of a face needs its state q = [P, v], 1 / rho, the law's tangent C and the impedances
+Z = sqrt(rho A_n) (and Z^-1) along the face and, for CTU, along the cell's two edges adjacent to
+it: its *side record* (`record_width`). A cell whose nodes all hold one state (bit for bit: one
+particle in the cell, R18's usual layout, or a uniform field) has one record for its four faces,
+computed once per right-hand side by `cell_records` (the law at the cell, the impedances along the
+cell's face directions); a side whose cell's nodes differ computes its trace's record at the face
+(the trace gathered through its CSR row, summed in scipy's order). The records of a cell are
+computed by the same point functions as at a face (the law's `skdgmpm.materials.points`,
+`equations.impedance`): the two paths differ only in where the state is read.
+
+For every face the pass then solves the linearised Riemann problem (`skdgmpm.equations`)
 and, for CTU, splits each fluctuation on the characteristic basis of the two edges of
 the cell it enters as soon as it is known, writing the two parts beside the face's flux; each
 edge then gathers the parts it receives (`DGMPM.interface_flux`: a CSR row gather, signs as
@@ -23,7 +31,7 @@ from numba import njit
 
 from skdgmpm.materials.points import tangent_call, tangent_point
 
-from .equations import add_normal_flux, ctu_split, fluctuations, impedance, riemann, traction
+from .equations import add_normal_flux, ctu_parts, ctu_split, embed, fluctuations, godunov, impedance, traction
 from .faces import gather_row
 from .kernel_cache import kernel_factory, scratch
 
@@ -68,63 +76,208 @@ def _add_boundary_edges(edge_bnd, f, G_0, G_1, corr_bnd):
             corr_bnd[j, k] += G_1[k] - G_0[k]
 
 
+# ---------------------------------------------------------------- side records
+def record_width(d, slots):
+    """Entries of one side record: q (nc), 1 / rho, the tangent C (d^4), then per face direction
+    of the cell (``slots``) its impedance Z = sqrt(rho A_n) and Z^-1 (d * d each)."""
+    return d * d + d + 1 + d ** 4 + 2 * d * d * slots
+
+
 @njit(cache=True, inline="always")
-def _split_into(w, C, rho, topo, f, G, k):
-    """`equations.ctu_split` per unit Delta t (scale -1 / (2 h)) of a fluctuation entering one
-    side of face f: its parts for the cell's two edges into G[f, k] and G[f, k + 1]."""
-    h, normals = topo
-    ok, G_0, G_1 = ctu_split(w, C, rho, -1.0 / (2.0 * h[f]), normals[f, 0, 0], normals[f, 0, 1],
-                             normals[f, 1, 0], normals[f, 1, 1])
-    for c in range(6):
-        G[f, k, c] = G_0[c]
-        G[f, k + 1, c] = G_1[c]
+def _fill_record(q, rho, C, normals, r, d, slots):
+    """The side record r of a state (q, rho) with tangent C, its impedances along the cell's face
+    directions normals (slots, d); False where an acoustic tensor is not positive definite."""
+    nc, dd = d * d + d, d * d
+    Z, Zi = scratch((d, d)), scratch((d, d))
+    for k in range(nc):
+        r[k] = q[k]
+    r[nc] = 1.0 / rho
+    o = nc + 1
+    for i in range(d):
+        for a in range(d):
+            for j in range(d):
+                for b in range(d):
+                    r[o] = C[i, a, j, b]
+                    o += 1
+    ok = True
+    for s in range(slots):
+        ok = impedance(C, normals[s], rho, Z, Zi, d) and ok
+        for i in range(d):
+            for j in range(d):
+                r[o + i * d + j] = Z[i, j]
+                r[o + dd + i * d + j] = Zi[i, j]
+        o += 2 * dd
     return ok
 
 
-# ---------------------------------------------------------------- interior faces
-def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params, ctu, topo_L, topo_R,
-                  flux, G):
-    """Godunov flux of every interior face into flux (nf, nc) and, for ``ctu`` (2D), the
-    transverse parts per unit Delta t of both sides' fluctuations into G (nf, 4, nc): side L's
-    for its cell's two edges in G[:, 0:2], side R's in G[:, 2:4] (summed on the edges by a row
-    gather, `quadrature.gather_rows`: each face writes its own rows only). Returns the first face whose
-    acoustic tensor is not positive definite, or -1."""
-    return _interior_pass(N.shape[1])(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
-                                      ctu, topo_L, topo_R, flux, G)
+@njit(cache=True, inline="always")
+def _copy_record(rec, state, c, r):
+    """Row c of the cell records into the side record r (stack scratch: no array view, whose
+    reference counting would cost more than the copy); whether it is admissible."""
+    for k in range(len(r)):
+        r[k] = rec[c, k]
+    return state[c] == 1
+
+
+@njit(cache=True, inline="always")
+def _record_tangent(r, C, d):
+    """C (d, d, d, d) of a side record."""
+    o = d * d + d + 1
+    for i in range(d):
+        for a in range(d):
+            for j in range(d):
+                for b in range(d):
+                    C[i, a, j, b] = r[o]
+                    o += 1
+
+
+@njit(cache=True, inline="always")
+def _record_impedance(r, slot, Z, d):
+    """Z (d, d) of a side record along the face direction ``slot``."""
+    o = d * d + d + 1 + d ** 4 + 2 * d * d * slot
+    for i in range(d):
+        for j in range(d):
+            Z[i, j] = r[o + i * d + j]
+
+
+@njit(cache=True, inline="always")
+def _record_pair(r, slot):
+    """(Z, Z^-1) of a 2D side record along the face direction ``slot``, as the 8-tuple
+    `equations.ctu_parts` takes."""
+    o = 4 + 2 + 1 + 16 + 8 * slot
+    return (r[o], r[o + 1], r[o + 2], r[o + 3], r[o + 4], r[o + 5], r[o + 6], r[o + 7])
+
+
+def cell_records(dofs, U, Q, rho, cell_material, laws, params, normals, rec, state):
+    """The side record of every cell whose nodes hold one state (bit for bit: one particle in the
+    cell, or a uniform field), into rec (n_cells, `record_width`): every face of such a cell sees
+    that state, so its tangent and impedances are computed once, not at each of its faces. state
+    (n_cells,) int8: 0 the nodes differ (the faces compute their traces' records), 1 recorded,
+    2 recorded but an acoustic tensor is not positive definite. dofs (n_cells, nodes per cell);
+    normals (n_cells, slots, d) the cell's face directions."""
+    d, slots = normals.shape[2], normals.shape[1]
+    _cell_records(d, slots, dofs.shape[1])(dofs, U, Q, rho, cell_material, laws, params, normals, rec, state)
 
 
 @kernel_factory
-def _interior_pass(d):                  # a literal d: the (d, d) loops unrolled
-    def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params,
-                      ctu, topo_L, topo_R, flux, G):
-        nc = d * d + d
-        q_L, q_R, w_L, w_R = scratch((nc,)), scratch((nc,)), scratch((nc,)), scratch((nc,))
-        F_L, F_R = scratch((3, 3)), scratch((3, 3))
-        C_L, C_R = scratch((d, d, d, d)), scratch((d, d, d, d))
+def _cell_records(d, slots, nodes):
+    nc, width = d * d + d, record_width(d, slots)
+
+    def cell_records(dofs, U, Q, rho, cell_material, laws, params, normals, rec, state):
+        F, C, u, q = scratch((3, 3)), scratch((d, d, d, d)), scratch((nc,)), scratch((nc,))
+        n_c, r = scratch((slots, d)), scratch((width,))
+        for c in range(len(dofs)):          # rows copied into stack scratch: no array views (their
+            n0 = dofs[c, 0]                 # reference counting costs more than the copies)
+            same = True
+            for k in range(1, nodes):
+                n = dofs[c, k]
+                same = same and rho[n] == rho[n0]
+                for j in range(nc):
+                    same = same and U[n, j] == U[n0, j] and Q[n, j] == Q[n0, j]
+            if not same:
+                state[c] = 0
+                continue
+            for j in range(nc):
+                u[j], q[j] = U[n0, j], Q[n0, j]
+            for s in range(slots):
+                for i in range(d):
+                    n_c[s, i] = normals[c, s, i]
+            embed(u, F, d)
+            m = cell_material[c]
+            if d == 1:
+                tangent_call(laws[m], params[m], F, C, d)
+            else:
+                tangent_point(laws[m], params[m], F, C, d)
+            state[c] = 1 if _fill_record(q, rho[n0], C, n_c, r, d, slots) else 2
+            for k in range(width):
+                rec[c, k] = r[k]
+    return cell_records
+
+
+# ---------------------------------------------------------------- interior faces
+def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params, records, ctu, topo_L,
+                  topo_R, flux, G):
+    """Godunov flux of every interior face into flux (nf, nc) and, for ``ctu`` (2D), the
+    transverse parts per unit Delta t of both sides' fluctuations into G (nf, 4, nc): side L's
+    for its cell's two edges in G[:, 0:2], side R's in G[:, 2:4] (summed on the edges by a row
+    gather, `quadrature.gather_rows`: each face writes its own rows only). ``records`` = (rec,
+    state, normals, local face of each face in cell L, in cell R) (`cell_records`): a side whose
+    cell is recorded reads its record, another computes its trace's record. Returns the first face
+    whose acoustic tensor is not positive definite, or -1."""
+    rec, state, normals, k_L, k_R, recorded = records
+    return _interior_pass(N.shape[1], normals.shape[1], bool(recorded))(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws,
+                                                        params, rec, state, normals, k_L, k_R, ctu, topo_L, topo_R,
+                                                        flux, G)
+
+
+@kernel_factory
+def _interior_pass(d, slots, recorded):     # literals: the loops unrolled, the trace path compiled only if needed
+    nc, dd = d * d + d, d * d
+    width = record_width(d, slots)
+
+    def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params, rec, state, normals,
+                      k_L, k_R, ctu, topo_L, topo_R, flux, G):
+        s_L, s_R, q, w_L, w_R = scratch((width,)), scratch((width,)), scratch((nc,)), scratch((nc,)), scratch((nc,))
+        F, C_L, C_R = scratch((3, 3)), scratch((d, d, d, d)), scratch((d, d, d, d))
+        Z_L, Z_R = scratch((d, d)), scratch((d, d))
         t_L, t_R, t_s, v_s = scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,))
         for f in range(len(N)):
-            rho_L = _gather(T_L, f, U, Q, rho, q_L, F_L, d)
-            rho_R = _gather(T_R, f, U, Q, rho, q_R, F_R, d)
-            m_L, m_R = cell_material[cell_L[f]], cell_material[cell_R[f]]
-            if d == 1:                  # the law called, not inlined (`points.tangent_call`)
-                tangent_call(laws[m_L], params[m_L], F_L, C_L, d)
-                tangent_call(laws[m_R], params[m_R], F_R, C_R, d)
+            c_L, c_R = cell_L[f], cell_R[f]
+            if recorded:                        # every cell recorded: no trace read
+                ok_L, ok_R = _copy_record(rec, state, c_L, s_L), _copy_record(rec, state, c_R, s_R)
             else:
-                tangent_point(laws[m_L], params[m_L], F_L, C_L, d)
-                tangent_point(laws[m_R], params[m_R], F_R, C_R, d)
-            if not riemann(q_L, C_L, rho_L, q_R, C_R, rho_R, N[f], t_L, t_R, t_s, v_s, d):
+                if state[c_L] == 0:                 # the nodes differ: the trace's record
+                    rho_f = _gather(T_L, f, U, Q, rho, q, F, d)
+                    m = cell_material[c_L]
+                    if d == 1:                      # the law called, not inlined (`points.tangent_call`)
+                        tangent_call(laws[m], params[m], F, C_L, d)
+                    else:
+                        tangent_point(laws[m], params[m], F, C_L, d)
+                    ok_L = _fill_record(q, rho_f, C_L, normals[c_L], s_L, d, slots)
+                else:
+                    ok_L = _copy_record(rec, state, c_L, s_L)
+                if state[c_R] == 0:
+                    rho_f = _gather(T_R, f, U, Q, rho, q, F, d)
+                    m = cell_material[c_R]
+                    if d == 1:
+                        tangent_call(laws[m], params[m], F, C_R, d)
+                    else:
+                        tangent_point(laws[m], params[m], F, C_R, d)
+                    ok_R = _fill_record(q, rho_f, C_R, normals[c_R], s_R, d, slots)
+                else:
+                    ok_R = _copy_record(rec, state, c_R, s_R)
+            if not (ok_L and ok_R):
                 return f
+            _record_impedance(s_L, k_L[f] % slots, Z_L, d)
+            _record_impedance(s_R, k_R[f] % slots, Z_R, d)
+            traction(s_L, N[f], t_L, d)
+            traction(s_R, N[f], t_R, d)
+            godunov(t_L, s_L[dd:nc], t_R, s_R[dd:nc], Z_L, Z_R, t_s, v_s, d)
             for k in range(nc):
                 flux[f, k] = 0.0
             add_normal_flux(t_s, v_s, N[f], 1.0, flux[f], d)
             if d == 2 and ctu:              # fluctuations A- dQ into L, A+ dQ into R, split at once
-                fluctuations(q_L, q_R, N[f], t_L, t_R, flux[f], w_L, w_R, d)
-                if not _split_into(w_L, C_L, rho_L, topo_L, f, G, 0):
-                    return f
-                if not _split_into(w_R, C_R, rho_R, topo_R, f, G, 2):
-                    return f
+                fluctuations(s_L, s_R, N[f], t_L, t_R, flux[f], w_L, w_R, d)
+                _record_tangent(s_L, C_L, d)
+                _record_tangent(s_R, C_R, d)
+                _split_into(w_L, C_L, s_L, k_L[f], topo_L, f, G, 0, slots)
+                _split_into(w_R, C_R, s_R, k_R[f], topo_R, f, G, 2, slots)
         return -1
     return interior_pass
+
+
+@njit(cache=True, inline="always")
+def _split_into(w, C, r, k, topo, f, G, part, slots):
+    """`equations.ctu_parts` per unit Delta t (scale -1 / (2 h)) of a fluctuation entering one
+    side of face f, local face k of the side's cell with record r: its parts for the cell's two
+    edges adjacent to the face (local faces k + 1, k + 3) into G[f, part] and G[f, part + 1]."""
+    h, normals = topo
+    G_0, G_1 = ctu_parts(w, C, r[6], -1.0 / (2.0 * h[f]), normals[f, 0, 0], normals[f, 0, 1],
+                         normals[f, 1, 0], normals[f, 1, 1], _record_pair(r, ((k + 1) % 4) % slots),
+                         _record_pair(r, ((k + 3) % 4) % slots))
+    for c in range(6):
+        G[f, part, c] = G_0[c]
+        G[f, part + 1, c] = G_1[c]
 
 
 @njit(cache=True, nogil=True)

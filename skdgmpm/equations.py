@@ -263,14 +263,22 @@ def ctu_split(w, C, rho, scale, a0, a1, b0, b1):
     leaving the cell through that edge): (ok, G_0, G_1) as 6-tuples (scalars: the split stays in
     registers); ok False where an acoustic tensor is not positive definite. Two opposite edges
     share one impedance (A_n is quadratic in n)."""
-    m = (C[0, 0, 0, 0] * w[0] + C[0, 0, 0, 1] * w[1] + C[0, 0, 1, 0] * w[2] + C[0, 0, 1, 1] * w[3],
-         C[0, 1, 0, 0] * w[0] + C[0, 1, 0, 1] * w[1] + C[0, 1, 1, 0] * w[2] + C[0, 1, 1, 1] * w[3],
-         C[1, 0, 0, 0] * w[0] + C[1, 0, 0, 1] * w[1] + C[1, 0, 1, 0] * w[2] + C[1, 0, 1, 1] * w[3],
-         C[1, 1, 0, 0] * w[0] + C[1, 1, 0, 1] * w[1] + C[1, 1, 1, 0] * w[2] + C[1, 1, 1, 1] * w[3])
-    inv_rho = 1.0 / rho                 # one division (they dominate the cost)
     ok, Z = _edge_impedance(C, rho, a0, a1)
     if ok and not (b0 == -a0 and b1 == -a1):
         ok, Z_b = _edge_impedance(C, rho, b0, b1)
     else:
         Z_b = Z
-    return ok, _edge_split(w, m, a0, a1, inv_rho, scale, Z), _edge_split(w, m, b0, b1, inv_rho, scale, Z_b)
+    G_0, G_1 = ctu_parts(w, C, 1.0 / rho, scale, a0, a1, b0, b1, Z, Z_b)
+    return ok, G_0, G_1
+
+
+@njit(cache=True, inline="always")
+def ctu_parts(w, C, inv_rho, scale, a0, a1, b0, b1, Z_a, Z_b):
+    """`ctu_split` given 1 / rho and the impedances along both edges, (Z, Z^-1) as 8-tuples (as
+    `_edge_impedance` gives them; a side that knows them already, e.g. a cell whose state is
+    uniform, `skdgmpm.dgmpm_kernels`): (G_0, G_1)."""
+    m = (C[0, 0, 0, 0] * w[0] + C[0, 0, 0, 1] * w[1] + C[0, 0, 1, 0] * w[2] + C[0, 0, 1, 1] * w[3],
+         C[0, 1, 0, 0] * w[0] + C[0, 1, 0, 1] * w[1] + C[0, 1, 1, 0] * w[2] + C[0, 1, 1, 1] * w[3],
+         C[1, 0, 0, 0] * w[0] + C[1, 0, 0, 1] * w[1] + C[1, 0, 1, 0] * w[2] + C[1, 0, 1, 1] * w[3],
+         C[1, 1, 0, 0] * w[0] + C[1, 1, 0, 1] * w[1] + C[1, 1, 1, 0] * w[2] + C[1, 1, 1, 1] * w[3])
+    return _edge_split(w, m, a0, a1, inv_rho, scale, Z_a), _edge_split(w, m, b0, b1, inv_rho, scale, Z_b)

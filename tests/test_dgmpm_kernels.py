@@ -26,20 +26,32 @@ def _stepper(transverse):
     return st
 
 
-def _random_state(st, seed=0):
+def _random_state(st, seed=0, uniform=None):
+    """A random state at the nodes; the cells where ``uniform`` is True hold one state at all their
+    nodes (as one particle per cell gives), which the face pass reads from the cell's record."""
     rng = np.random.default_rng(seed)
     n, d = st.n_dofs, st.d
     F = np.eye(d)[None] + 0.05 * rng.standard_normal((n, d, d))
-    P = st.materials.stress(F, st.cell_material[st.dof_cell])
     v = 10.0 * rng.standard_normal((n, d))
+    if uniform is not None:
+        first = st.cell_dofs[:, 0][st.dof_cell]              # each node's cell's first node
+        same = uniform[st.dof_cell]
+        F[same], v[same] = F[first[same]], v[first[same]]
+        st.map.rho[same] = st.map.rho[first[same]]
+    P = st.materials.stress(F, st.cell_material[st.dof_cell])
     U = system.join(F, st.map.rho[:, None] * v)
     return GridState(U, system.join(P, v))
 
 
+UNIFORM = {"none": lambda n: None, "all": lambda n: np.ones(n, bool), "half": lambda n: np.arange(n) % 2 == 0}
+
+
+@pytest.mark.parametrize("uniform", UNIFORM)
 @pytest.mark.parametrize("transverse", ["dcu", "ctu"])
-def test_interior_pass_matches_batched_path(transverse):
+def test_interior_pass_matches_batched_path(transverse, uniform):
+    """Both paths of a face side (the cell's record, the trace's record), alone and mixed."""
     st = _stepper(transverse)
-    g = _random_state(st)
+    g = _random_state(st, uniform=UNIFORM[uniform](len(st.cell_dofs)))
     f, d, dt = st.interior, st.d, 1e-7
     flux, corr, corr_bnd = st.interface_flux(g)
     flux, corr_bnd = flux + dt * corr, dt * corr_bnd
@@ -61,3 +73,21 @@ def test_interior_pass_matches_batched_path(transverse):
     assert np.all(np.abs(flux - ref) <= 1e-12 * scale)
     assert np.all(np.abs(corr_bnd - ref_bnd) <= 1e-12 * np.abs(ref).max())
 
+
+
+def test_a_recorded_cell_that_is_not_hyperbolic_stops_the_pass_at_its_first_face():
+    """A cell whose nodes hold one state with a negative density (rho A_n negative definite): its
+    record says so and the face pass stops at the first face of that cell, naming it."""
+    from skdgmpm.errors import InstabilityError
+    st = _stepper("ctu")
+    n_cells = len(st.cell_dofs)
+    g = _random_state(st, uniform=np.ones(n_cells, bool))
+    c = n_cells // 2
+    st.map.rho[st.dof_cell == c] *= -1.0
+    with pytest.raises(InstabilityError, match="not positive definite"):
+        try:
+            st.interface_flux(g)
+        except InstabilityError as exc:
+            faces = np.flatnonzero((st.interior.cell_L == c) | (st.interior.cell_R == c))
+            assert str(exc).endswith(f"at face {faces[0]}")
+            raise
