@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 
 from skdgmpm import parallel
-from skdgmpm.kernel_cache import kernel_factory
+from skdgmpm.kernel_cache import kernel_factory, scratch
 
 from . import gavrilyuk, hencky_j2, j2_plasticity, linear_elastic, mooney_rivlin, neo_hookean, saint_venant_kirchhoff
 
@@ -102,8 +102,17 @@ def law_table(materials):
 @kernel_factory
 def _tangents(d):                       # a literal d: the loops unrolled
     def tangents(law, prm, F, C):
+        F_p, C_p = scratch((3, 3)), scratch((d, d, d, d))     # copies, not row views (reference counted)
         for p in range(len(F)):
-            tangent_point(law, prm, F[p], C[p], d)
+            for i in range(3):
+                for a in range(3):
+                    F_p[i, a] = F[p, i, a]
+            tangent_point(law, prm, F_p, C_p, d)
+            for i in range(d):
+                for a in range(d):
+                    for j in range(d):
+                        for b in range(d):
+                            C[p, i, a, j, b] = C_p[i, a, j, b]
     return tangents
 
 

@@ -109,19 +109,23 @@ def _picard_update_kernel(nc, n_r):
 
 @njit(cache=True, inline="always")
 def _picard_update_nc(U0, T, div, dt, scale, u_hat, new, nc, n_r, lo, hi):
-    big = np.zeros(nc)                  # max |new - u_hat| per component, nan once one is nan
-    for s in range(len(new)):
-        out, U0_s, u_s = new[s], U0[s if len(U0) > 1 else 0], u_hat[s if len(u_hat) > 1 else 0]
-        for j in range(lo * nc, hi * nc):
-            acc = 0.0
-            for r in range(n_r):
-                acc += T[s, r] * div[r, j]
-            out[j] = U0_s[j] - dt * acc
-        for p in range(lo, hi):
+    big, t = scratch((nc,)), scratch((n_r,))    # max |new - u_hat| per component, nan once one is nan
+    for v in range(nc):
+        big[v] = 0.0
+    for s in range(len(new)):           # indices into the 2D arrays, no row views (reference counted)
+        s_0, s_u = (s if len(U0) > 1 else 0), (s if len(u_hat) > 1 else 0)
+        for r in range(n_r):
+            t[r] = T[s, r]
+        for p in range(lo, hi):         # one pass: the update and its change, no branch
             for v in range(nc):
-                x = abs(out[p * nc + v] - u_s[p * nc + v])
-                if x > big[v] or x != x:
-                    big[v] = x
+                j = p * nc + v
+                acc = 0.0
+                for r in range(n_r):
+                    acc += t[r] * div[r, j]
+                y = U0[s_0, j] - dt * acc
+                new[s, j] = y
+                x = abs(y - u_hat[s_u, j])
+                big[v] = x if (x > big[v] or x != x) else big[v]
     change = 0.0
     for v in range(nc):
         x = big[v] / scale[v]

@@ -32,26 +32,35 @@ def interior_flux_sum(T_L, T_R, u_hat, q_hat, rho_L, rho_R, N, mat_L, mat_R, law
 @kernel_factory
 def _interior_flux_sum(d):              # a literal d: the (d, d) loops unrolled
     def interior_flux_sum(T_L, T_R, u_hat, q_hat, rho_L, rho_R, N, mat_L, mat_R, laws, params, weights, flux):
+        """Rows of the arrays are read into stack scratch, never handed on as views (u_hat[s],
+        N[f], flux[f]): a view is reference counted at every face."""
         nc = d * d + d
-        q_L, q_R = scratch((nc,)), scratch((nc,))
+        q_L, q_R, o = scratch((nc,)), scratch((nc,)), scratch((nc,))
         F_L, F_R = scratch((3, 3)), scratch((3, 3))
         C_L, C_R = scratch((d, d, d, d)), scratch((d, d, d, d))
-        t_L, t_R, t_s, v_s = scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,))
+        t_L, t_R, t_s, v_s, n = scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,))
+        n_points = u_hat.shape[1]
+        u_flat = u_hat.reshape((-1, nc))
+        q_flat = q_hat.reshape((-1, nc))
         for f in range(len(N)):
             for c in range(nc):
-                flux[f, c] = 0.0
+                o[c] = 0.0
+            for i in range(d):
+                n[i] = N[f, i]
             for s in range(len(weights)):
-                _gather(T_L, f, u_hat[s], q_hat[s], q_L, F_L, d)
-                _gather(T_R, f, u_hat[s], q_hat[s], q_R, F_R, d)
+                _gather(T_L, f, u_flat, q_flat, q_L, F_L, d, s * n_points)
+                _gather(T_R, f, u_flat, q_flat, q_R, F_R, d, s * n_points)
                 if d == 1:              # the law called, not inlined (`points.tangent_call`)
                     tangent_call(laws[mat_L[f]], params[mat_L[f]], F_L, C_L, d)
                     tangent_call(laws[mat_R[f]], params[mat_R[f]], F_R, C_R, d)
                 else:
                     tangent_point(laws[mat_L[f]], params[mat_L[f]], F_L, C_L, d)
                     tangent_point(laws[mat_R[f]], params[mat_R[f]], F_R, C_R, d)
-                if not riemann(q_L, C_L, rho_L[f], q_R, C_R, rho_R[f], N[f], t_L, t_R, t_s, v_s, d):
+                if not riemann(q_L, C_L, rho_L[f], q_R, C_R, rho_R[f], n, t_L, t_R, t_s, v_s, d):
                     return f
-                add_normal_flux(t_s, v_s, N[f], weights[s], flux[f], d)
+                add_normal_flux(t_s, v_s, n, weights[s], o, d)
+            for c in range(nc):
+                flux[f, c] = o[c]
         return -1
     return interior_flux_sum
 
@@ -67,10 +76,16 @@ def traces(T, u_hat, q_hat, F, Q):
 @kernel_factory
 def _traces(d):
     def traces(T, u_hat, q_hat, F, Q):
-        Fe = scratch((3, 3))
+        nc = d * d + d
+        Fe, q = scratch((3, 3)), scratch((nc,))
+        n_points = u_hat.shape[1]
+        u_flat = u_hat.reshape((-1, nc))
+        q_flat = q_hat.reshape((-1, nc))
         for s in range(len(Q)):
             for r in range(Q.shape[1]):
-                _gather(T, r, u_hat[s], q_hat[s], Q[s, r], Fe, d)
+                _gather(T, r, u_flat, q_flat, q, Fe, d, s * n_points)
+                for c in range(nc):
+                    Q[s, r, c] = q[c]
                 for i in range(d):
                     for a in range(d):
                         F[s, r, i * d + a] = Fe[i, a]

@@ -15,18 +15,28 @@ from .system import DIMENSION, embed
 
 @kernel_factory
 def _states(d):                         # a literal d: the loops unrolled
-    dd = d * d
+    dd, nc = d * d, d * d + d
 
     def states(laws, params, index, U, rho, h_n, h, Q):
-        F, P = scratch((3, 3)), scratch((d, d))
+        """Each point's row copied into stack scratch: a row view (U[k], h[k]) handed to the
+        inlined law would be reference counted at every point (half the time of the pass)."""
+        F, P, u = scratch((3, 3)), scratch((d, d)), scratch((nc,))
+        n_h = h_n.shape[1]
+        h_k_n, h_k = scratch((n_h,)), scratch((n_h,))
         for k in range(len(U)):
-            _embed_point(U[k], F, d)
+            for c in range(nc):
+                u[c] = U[k, c]
+            for c in range(n_h):
+                h_k_n[c] = h_n[k, c]
+            _embed_point(u, F, d)
             m = index[k]
-            stress_update_point(laws[m], params[m], F, h_n[k], h[k], P, d)
+            stress_update_point(laws[m], params[m], F, h_k_n, h_k, P, d)
+            for c in range(n_h):
+                h[k, c] = h_k[c]
             for i in range(d):
                 for a in range(d):
                     Q[k, i * d + a] = P[i, a]
-                Q[k, dd + i] = U[k, dd + i] / rho[k]
+                Q[k, dd + i] = u[dd + i] / rho[k]
     return states
 
 

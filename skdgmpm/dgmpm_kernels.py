@@ -100,8 +100,11 @@ def _fill_record(q, rho, C, normals, r, d, slots):
                     r[o] = C[i, a, j, b]
                     o += 1
     ok = True
+    n = scratch((d,))
     for s in range(slots):
-        ok = impedance(C, normals[s], rho, Z, Zi, d) and ok
+        for i in range(d):
+            n[i] = normals[s, i]
+        ok = impedance(C, n, rho, Z, Zi, d) and ok
         for i in range(d):
             for j in range(d):
                 r[o + i * d + j] = Z[i, j]
@@ -221,6 +224,7 @@ def _interior_pass(d, slots, recorded):     # literals: the loops unrolled, the 
         F, C_L, C_R = scratch((3, 3)), scratch((d, d, d, d)), scratch((d, d, d, d))
         Z_L, Z_R = scratch((d, d)), scratch((d, d))
         t_L, t_R, t_s, v_s = scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,))
+        n, v_L, v_R, o = scratch((d,)), scratch((d,)), scratch((d,)), scratch((nc,))
         for f in range(len(N)):
             c_L, c_R = cell_L[f], cell_R[f]
             if recorded:                        # every cell recorded: no trace read
@@ -233,7 +237,7 @@ def _interior_pass(d, slots, recorded):     # literals: the loops unrolled, the 
                         tangent_call(laws[m], params[m], F, C_L, d)
                     else:
                         tangent_point(laws[m], params[m], F, C_L, d)
-                    ok_L = _fill_record(q, rho_f, C_L, normals[c_L], s_L, d, slots)
+                    ok_L = _fill_record(q, rho_f, C_L, normals[c_L], s_L, d, slots)     # a view: rare path
                 else:
                     ok_L = _copy_record(rec, state, c_L, s_L)
                 if state[c_R] == 0:
@@ -250,14 +254,18 @@ def _interior_pass(d, slots, recorded):     # literals: the loops unrolled, the 
                 return f
             _record_impedance(s_L, k_L[f] % slots, Z_L, d)
             _record_impedance(s_R, k_R[f] % slots, Z_R, d)
-            traction(s_L, N[f], t_L, d)
-            traction(s_R, N[f], t_R, d)
-            godunov(t_L, s_L[dd:nc], t_R, s_R[dd:nc], Z_L, Z_R, t_s, v_s, d)
+            for i in range(d):              # rows copied, not viewed (views are reference counted)
+                n[i], v_L[i], v_R[i] = N[f, i], s_L[dd + i], s_R[dd + i]
+            traction(s_L, n, t_L, d)
+            traction(s_R, n, t_R, d)
+            godunov(t_L, v_L, t_R, v_R, Z_L, Z_R, t_s, v_s, d)
             for k in range(nc):
-                flux[f, k] = 0.0
-            add_normal_flux(t_s, v_s, N[f], 1.0, flux[f], d)
+                o[k] = 0.0
+            add_normal_flux(t_s, v_s, n, 1.0, o, d)
+            for k in range(nc):
+                flux[f, k] = o[k]
             if d == 2 and ctu:              # fluctuations A- dQ into L, A+ dQ into R, split at once
-                fluctuations(s_L, s_R, N[f], t_L, t_R, flux[f], w_L, w_R, d)
+                fluctuations(s_L, s_R, n, t_L, t_R, o, w_L, w_R, d)
                 _record_tangent(s_L, C_L, d)
                 _record_tangent(s_R, C_R, d)
                 _split_into(w_L, C_L, s_L, k_L[f], topo_L, f, G, 0, slots)

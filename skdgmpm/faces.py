@@ -29,10 +29,12 @@ def _integrate(nc):                     # a literal width: the loop unrolled
 
 
 @njit(cache=True, inline="always")
-def gather_row(trace, f, u, q, q_f, F, d):
+def gather_row(trace, f, u, q, q_f, F, d, offset=0):
     """Row f of a trace (CSR triple) applied to q (into q_f (nc,)) and to u's F part (embedded into
     F (3, 3)), each row's products summed in CSR order as scipy's product does: the side state of
-    one face row, for the compiled face passes."""
+    one face row, for the compiled face passes. The trace's columns are rows ``offset + j`` of u
+    and q (a time node s of a predictor flattened to (S n, nc): offset s n; a view u[s] handed to
+    an inlined function would be reference counted at every face)."""
     indptr, indices, data = trace
     nc = q_f.shape[0]
     u_f = scratch((d * d,))
@@ -41,7 +43,7 @@ def gather_row(trace, f, u, q, q_f, F, d):
     for c in range(d * d):
         u_f[c] = 0.0
     for k in range(indptr[f], indptr[f + 1]):
-        n, w = indices[k], data[k]
+        n, w = offset + indices[k], data[k]
         for c in range(nc):
             q_f[c] += w * q[n, c]
         for c in range(d * d):

@@ -84,14 +84,15 @@ def _assess(d):                         # a literal d: the (d, d) loops unrolled
         ``lowest`` (nan where not finite), the fastest wave sqrt(largest / rho) over the first
         ``n_axes`` into ``speed``. One pass: the law's point tangent (`materials.points`), closed
         forms for d <= 2."""
-        F, C, A = scratch((3, 3)), scratch((d, d, d, d)), scratch((d, d))
+        F, C, A, u = scratch((3, 3)), scratch((d, d, d, d)), scratch((d, d)), scratch((d * d + d,))
         for p in range(len(U)):
             ok = True
             for k in range(d * d + d):        # U.shape[1], a literal count
-                ok = ok and np.isfinite(U[p, k]) and np.isfinite(Q[p, k])
+                u[k] = U[p, k]              # a copy, not the view U[p]: no reference counting
+                ok = ok and np.isfinite(u[k]) and np.isfinite(Q[p, k])
             finite[p] = ok
             if ok:
-                embed(U[p], F, d)
+                embed(u, F, d)
             else:                           # I where not finite
                 for i in range(3):
                     for a in range(3):

@@ -41,14 +41,29 @@ def _godunov_states(d):
 
 @kernel_factory
 def _godunov_fluxes(d):
+    nc = d * d + d
+
     def godunov_fluxes(Q_L, C_L, rho_L, Q_R, C_R, rho_R, N, flux, fluct_L, fluct_R):
-        t_L, t_R, t_s, v_s = scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,))
+        """Each face's rows copied into stack scratch: row views (Q_L[f], C_L[f], ...) handed to
+        the inlined point functions would be reference counted at every face."""
+        t_L, t_R, t_s, v_s, n = scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,))
+        q_L, q_R, o, w_L, w_R = scratch((nc,)), scratch((nc,)), scratch((nc,)), scratch((nc,)), scratch((nc,))
+        c_L, c_R = scratch((d, d, d, d)), scratch((d, d, d, d))
         for f in range(len(N)):
-            if not riemann(Q_L[f], C_L[f], rho_L[f], Q_R[f], C_R[f], rho_R[f], N[f], t_L, t_R, t_s, v_s, d):
+            for k in range(nc):
+                q_L[k], q_R[k], o[k] = Q_L[f, k], Q_R[f, k], 0.0
+            for i in range(d):
+                n[i] = N[f, i]
+                for a in range(d):
+                    for j in range(d):
+                        for b in range(d):
+                            c_L[i, a, j, b], c_R[i, a, j, b] = C_L[f, i, a, j, b], C_R[f, i, a, j, b]
+            if not riemann(q_L, c_L, rho_L[f], q_R, c_R, rho_R[f], n, t_L, t_R, t_s, v_s, d):
                 return f
-            flux[f] = 0.0
-            add_normal_flux(t_s, v_s, N[f], 1.0, flux[f], d)
-            fluctuations(Q_L[f], Q_R[f], N[f], t_L, t_R, flux[f], fluct_L[f], fluct_R[f], d)
+            add_normal_flux(t_s, v_s, n, 1.0, o, d)
+            fluctuations(q_L, q_R, n, t_L, t_R, o, w_L, w_R, d)
+            for k in range(nc):
+                flux[f, k], fluct_L[f, k], fluct_R[f, k] = o[k], w_L[k], w_R[k]
         return -1
     return godunov_fluxes
 
