@@ -2,8 +2,8 @@
 
 One step is the list of named stages of R18 §5 (a)-(h):
 
-    project -> time_step -> volume_flux -> boundary_flux -> interface_flux -> transverse_flux
-    -> source -> advance -> back_map -> constitutive_update
+    project -> time_step -> interface_flux -> boundary_flux -> transverse_flux -> source
+    -> advance (with the volume term) -> back_map -> constitutive_update
 
 ``advance`` is forward Euler [R18 eq 20] or Heun's RK2 with both stages on the grid [R18 §7.1]
 (the second stage evaluates the law at the grid nodes). The CTU corrections of R18 §4.4 (2D,
@@ -13,12 +13,14 @@ One step is the list of named stages of R18 §5 (a)-(h):
 int Phi rho0 b = sum_p S_ip V_p rho0 b(X_p, t) when a body force is set (particle quadrature, at
 the time the boundary values are taken).
 
-The volume term and the interior faces depend on Delta t only through the factor of the CTU
-corrections: they are computed once per projected state (``fixed_terms``), and an attempt that the
-CFL guard repeats with a smaller Delta t reuses them (the boundary pass, which depends on time, and
-everything after it are redone). A stage of ``advance`` is one compiled pass over the nodes,
-U + dt M^-1 (volume term + interior faces), the interior faces' integral gathered node by node,
-to which the boundary faces' terms are then added, weighted by dt M^-1 (no residual array).
+The interior faces depend on Delta t only through the factor of the CTU corrections: they are
+computed once per projected state (``fixed_terms``), and an attempt that the CFL guard repeats
+with a smaller Delta t reuses them (the boundary pass, which depends on time, and everything after
+it are redone). A stage of ``advance`` is one compiled pass over the nodes,
+U + dt M^-1 (volume term + interior faces), the volume term (c) sum_alpha K^alpha F_alpha(Q)
+computed row by row and the interior faces' integral gathered node by node in that pass (neither
+is stored), to which the boundary faces' terms are then added, weighted by dt M^-1 (no residual
+array). ``volume_flux`` remains as the stand-alone statement of (c).
 """
 from dataclasses import dataclass, field
 
@@ -60,10 +62,10 @@ class DGMPM(GodunovScheme):
     integrator: str = "euler"
     transverse: str = "dcu"
     body_force: object = None
-    stages: tuple = ("project", "time_step", "advance", "volume_flux", "interface_flux", "boundary_flux",
+    stages: tuple = ("project", "time_step", "advance", "interface_flux", "boundary_flux",
                      "transverse_flux", "source", "nodal_state", "back_map", "constitutive_update", "check")
     external_work: float = field(default=0.0, init=False)
-    _kept: tuple = field(default=None, init=False, repr=False)   # (projected state, its fixed_terms)
+    _kept: tuple = field(default=None, init=False, repr=False)   # (projected state, its interface flux)
 
     def __post_init__(self):
         if self.integrator not in ("euler", "rk2"):
@@ -295,14 +297,14 @@ class DGMPM(GodunovScheme):
         return filt
 
     def fixed_terms(self, grid_state):
-        """The volume term and `interface_flux` of a grid state: they depend on Delta t only
-        through the factor of the CTU corrections, so the CFL guard's repeated attempts on the
-        projected state reuse them."""
+        """`interface_flux` of a grid state: it depends on Delta t only through the factor of the
+        CTU corrections, so the CFL guard's repeated attempts on the projected state reuse it.
+        (The volume term is computed inside the Euler stage's pass over the nodes.)"""
         if self._kept is not None and self._kept[0] is grid_state:
             if self._kept[1] is None:
-                self._kept = (grid_state, (self.volume_flux(grid_state), *self.interface_flux(grid_state)))
+                self._kept = (grid_state, self.interface_flux(grid_state))
             return self._kept[1]
-        return (self.volume_flux(grid_state), *self.interface_flux(grid_state))
+        return self.interface_flux(grid_state)
 
     def add_boundary_terms(self, grid_state, time, dt, corr_bnd, weight, out):
         """out += weight (-int Phi F_N* over the boundary faces, with the CTU corrections that
@@ -331,11 +333,12 @@ class DGMPM(GodunovScheme):
         ``grid_state`` (boundary values at ``time``, CTU corrections for ``dt``): the volume term
         and the interior faces in one pass over the nodes (`euler_update`), then the boundary
         faces and the source; also returns the boundary power (W)."""
-        volume, flux, corr, corr_bnd = self.fixed_terms(grid_state)
+        flux, corr, corr_bnd = self.fixed_terms(grid_state)
         weight = (step, self.inv_M)              # step M^-1, node by node
         out = np.empty_like(base)
+        csr = parallel.csr_rows
         parallel.rows(len(base), lambda lo, hi: euler_update(
-            parallel.csr_rows(self.gather_interior, lo, hi), flux, corr, dt, volume[lo:hi], base[lo:hi],
+            csr(self.gather_interior, lo, hi), flux, corr, dt, grid_state.Q, csr(self.stiffness, lo, hi), base[lo:hi],
             (step, self.inv_M[lo:hi]), out[lo:hi]))
         power = self.add_boundary_terms(grid_state, time, dt, corr_bnd, weight, out)
         return out, power

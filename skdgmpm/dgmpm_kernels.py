@@ -34,6 +34,7 @@ from skdgmpm.materials.points import tangent_call, tangent_point
 from .equations import add_normal_flux, ctu_parts, ctu_split, embed, fluctuations, godunov, impedance, traction
 from .faces import gather_row
 from .kernel_cache import kernel_factory, scratch
+from .system import DIMENSION, volume_row
 
 
 # ---------------------------------------------------------------- point pieces (one face side)
@@ -368,25 +369,29 @@ def _boundary_pass(d):
     return boundary_pass
 
 
-def euler_update(gather, flux, corr, dt, volume, base, weight, out):
+def euler_update(gather, flux, corr, dt, Q, stiffness, base, weight, out):
     """out = base + w (volume + G (flux + dt corr)) node by node: a forward Euler stage but its
-    boundary terms in one pass over the nodes, given the volume term (n_dofs, nc), the interior
-    faces' fluxes and corrections per unit Delta t (nf, nc) and w = step M^-1 given as
+    boundary terms in one pass over the nodes, the volume term sum_alpha K^alpha F_alpha(Q) of the
+    nodal Q computed row by row in the same pass (`system.volume_row`: never stored), given the
+    interior faces' fluxes and corrections per unit Delta t (nf, nc) and w = step M^-1 given as
     ``weight`` = (step, inv_M (n_dofs,)).
     G (n_dofs, nf) is the interior surface integral as a gather (`DGMPM.gather_interior`): row i
     holds measure_f (T_R - T_L)[f, i] over the faces f of node i."""
-    _euler_update(flux.shape[1])(gather, flux, corr, dt, volume, base, weight, out)
+    _euler_update(flux.shape[1])(gather, flux, corr, dt, Q, stiffness, base, weight, out)
 
 
 @kernel_factory
 def _euler_update(nc):                  # a literal width: the loops unrolled
-    def euler_update(gather, flux, corr, dt, volume, base, weight, out):
+    d = DIMENSION[nc]
+
+    def euler_update(gather, flux, corr, dt, Q, stiffness, base, weight, out):
         indptr, indices, data = gather
         step, inv_M = weight
         r = scratch((nc,))
         for i in range(len(indptr) - 1):
             for c in range(nc):
-                r[c] = volume[i, c]
+                r[c] = 0.0
+            volume_row(Q, stiffness, i, r, d)
             for k in range(indptr[i], indptr[i + 1]):
                 f, g = indices[k], data[k]
                 for c in range(nc):

@@ -4,6 +4,7 @@ passes over them (the volume flux, the embedding of F), on the point physics of
 docs/CONVENTIONS.md); ``d`` is the scene dimension.
 """
 import numpy as np
+from numba import njit
 
 from .equations import add_flux, embed as _embed_point
 from . import parallel
@@ -64,29 +65,41 @@ def embed(F):
     return F3
 
 
+@njit(cache=True, inline="always")
+def volume_row(Q, stiffness, r, o, d):
+    """o += sum_alpha (K^alpha F_alpha(Q))[r], row r of the volume term (`volume_flux`), for a
+    prepared `Stiffness` (indptr, indices, data (d, nnz)): F_alpha (`equations.add_flux`) applied
+    to the row's weighted sums of Q (the flux is linear), summed in CSR order as scipy's product
+    does and added in the order of alpha. Also called inside other node passes (DGMPM's Euler
+    stage), so that the term is never stored."""
+    indptr, indices, data = stiffness
+    nc = d * d + d
+    s = scratch((d, nc))
+    for a in range(d):
+        for c in range(nc):
+            s[a, c] = 0.0
+    for k in range(indptr[r], indptr[r + 1]):    # the row read once for all the matrices
+        n = indices[k]
+        for a in range(d):
+            w = data[a, k]
+            for c in range(nc):
+                s[a, c] += w * Q[n, c]
+    for a in range(d):
+        add_flux(s[a], a, 1.0, o, d)
+
+
 @kernel_factory
 def _volume_flux(d):                    # a literal d: the loops unrolled
     def volume_flux(Q, indptr, indices, data, add, R):
         """R += sum_alpha K^alpha F_alpha(Q) for the CSR matrices K^alpha on one pattern (data:
-        their data arrays stacked (d, nnz)): F_alpha (`equations.add_flux`) applied to each row's
-        weighted sums of Q (the flux is linear), summed in CSR order as scipy's product does and
-        added in the order of alpha; R = ... (each row zeroed as it is reached) unless ``add``."""
+        their data arrays stacked (d, nnz)), row by row (`volume_row`); R = ... (each row zeroed as
+        it is reached) unless ``add``."""
         nc = d * d + d
-        s, o = scratch((d, nc)), scratch((nc,))
+        o = scratch((nc,))
         for r in range(len(indptr) - 1):
-            for a in range(d):
-                for c in range(nc):
-                    s[a, c] = 0.0
-            for k in range(indptr[r], indptr[r + 1]):    # the row read once for all the matrices
-                n = indices[k]
-                for a in range(d):
-                    w = data[a, k]
-                    for c in range(nc):
-                        s[a, c] += w * Q[n, c]
             for c in range(nc):
                 o[c] = R[r, c] if add else 0.0
-            for a in range(d):
-                add_flux(s[a], a, 1.0, o, d)
+            volume_row(Q, (indptr, indices, data), r, o, d)
             for c in range(nc):                          # each entry written once
                 R[r, c] = o[c]
     return volume_flux
