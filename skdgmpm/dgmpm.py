@@ -33,7 +33,7 @@ from .dgmpm_kernels import (boundary_edge_corrections, boundary_pass, boundary_s
 from .errors import InputError
 from .faces import interior_faces
 from .integrators import INTEGRATORS
-from .quadrature import ParticleMap, VolumeOperators, gather_rows, interpolation_matrix, particle_basis
+from .quadrature import ParticleMap, gather_rows, particle_operators
 from .riemann import _not_hyperbolic
 from .scheme import GodunovScheme, GridState, cell_values, stage
 
@@ -78,13 +78,11 @@ class DGMPM(GodunovScheme):
                              "grid nodes, where the history does not live)")
         g, p = self.grid, self.particles
         self.d = g.dim
-        basis, slot = particle_basis(g, p)
-        ops = VolumeOperators.assemble(basis)           # kept as the step reads them, not twice
-        self.stiffness = system.Stiffness(ops.stiffness)
-        self.map = ParticleMap.build(interpolation_matrix(basis, slot), p.volume, p.rho0, ops.lumped)
-        self.n_dofs = basis.N
-        self.dof_cell = np.empty(basis.N, dtype=np.int64)
-        self.dof_cell[basis.element_dofs] = np.arange(g.submesh.nelements)[None, :]
+        # built a chunk of cells at a time: the peak of the set-up is a chunk's basis, not the grid's
+        lumped, self.stiffness, S, self.dof_cell = particle_operators(g, p)
+        self.map = ParticleMap.build(S, p.volume, p.rho0, lumped)
+        del S
+        self.n_dofs = len(lumped)
         n_cells = g.submesh.nelements
         self.cell_material = cell_values("materials", p.cell, p.material, n_cells)
         self.cell_volume = g.cell_volumes()
@@ -98,7 +96,7 @@ class DGMPM(GodunovScheme):
         # -int Phi F* over the interior faces as a gather over each node's faces (`euler_update`)
         f = self.interior
         self.gather_interior = _csr((sp.diags(f.measure) @ (f.T_R - f.T_L)).T.tocsr())
-        self.inv_M = 1.0 / ops.lumped
+        self.inv_M = 1.0 / lumped
 
     # ---------------------------------------------------------------- set-up
     def _setup_transverse(self):
