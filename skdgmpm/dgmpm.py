@@ -269,9 +269,15 @@ class DGMPM(GodunovScheme):
         projected state reuse them."""
         if self._kept is not None and self._kept[0] is grid_state:
             if self._kept[1] is None:
-                self._kept = (grid_state, (self.volume_flux(grid_state), *self.interface_flux(grid_state)))
+                self._kept = (grid_state, self._fixed_terms(grid_state))
             return self._kept[1]
-        return (self.volume_flux(grid_state), *self.interface_flux(grid_state))
+        return self._fixed_terms(grid_state)
+
+    def _fixed_terms(self, grid_state):
+        # the faces first: their parts array G (nf, 4, nc) is freed before the volume term is
+        # allocated, so the two are never held together (the peak of a step)
+        flux, corr, corr_bnd = self.interface_flux(grid_state)
+        return self.volume_flux(grid_state), flux, corr, corr_bnd
 
     def add_boundary_terms(self, grid_state, time, dt, corr_bnd, weight, out):
         """out += weight (-int Phi F_N* over the boundary faces, with the CTU corrections that
@@ -338,9 +344,14 @@ class DGMPM(GodunovScheme):
 
         def attempt(dt):
             U_nodes, work = self.advance(grid_state, state.t, dt)
-            return self.constitutive_update(state, self.back_map(U_nodes), dt), work
+            U_p = self.back_map(U_nodes)
+            del U_nodes                         # not held through the constitutive update
+            return self.constitutive_update(state, U_p, dt), work
 
-        return self.step_with_cfl_guard(state, dt_max, attempt)
+        try:
+            return self.step_with_cfl_guard(state, dt_max, attempt)
+        finally:
+            self._kept = None       # the projected state and its terms: not held between steps
 
 
 def _csr(T):
