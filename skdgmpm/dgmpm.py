@@ -87,7 +87,7 @@ class DGMPM(GodunovScheme):
         self.cell_material = cell_values("materials", p.cell, p.material, n_cells)
         self.cell_volume = g.cell_volumes()
         self.h_min = float(g.cell_sizes().min())
-        self.interior = interior_faces(g.submesh, g.element)
+        self.interior = interior_faces(g.submesh, g.element, coordinates=False)    # X: not read here
         self._setup_boundary(g.element)
         self._setup_transverse()
         self.laws = law_table(self.materials.materials)          # the compiled point laws
@@ -226,7 +226,9 @@ class DGMPM(GodunovScheme):
         """CSR rows, one per interior edge, of the parts (rows of `interior_pass`'s G flattened,
         4 f + 2 side + e) that it receives and their signs (`quadrature.gather_rows`); and per
         boundary edge, the parts and the opposite edge's parts (`boundary_edge_corrections`).
-        Within a row the parts are in the order a loop over the faces meets them."""
+        Within a row the parts are in the order a loop over the faces meets them. The interior
+        edges' rows are int32 indices and int8 signs (+-1, exact: the products are the same bits
+        as with float64 signs; 72 -> 42 B per cell kept)."""
         nf = len(self.interior)
         part = 4 * np.arange(nf)[None, :] + np.arange(2)[:, None]            # (2 edges, nf)
         rows = {"interior": ([], [], []), "boundary": ([], [], [])}
@@ -246,7 +248,10 @@ class DGMPM(GodunovScheme):
             j, parts, third = (np.concatenate(a) for a in rows[name])
             order = np.lexsort((parts, j))
             indptr = np.concatenate([[0], np.cumsum(np.bincount(j, minlength=n))]).astype(np.int64)
-            out.append((indptr, parts[order].astype(np.int64), third[order]))
+            if name == "interior" and 4 * nf < 2 ** 31:      # the signs exact in int8, the indices in int32
+                out.append((indptr.astype(np.int32), parts[order].astype(np.int32), third[order].astype(np.int8)))
+            else:
+                out.append((indptr, parts[order].astype(np.int64), third[order]))
         return out
 
     def _boundary_filter(self, frame, free_v, free_t):
