@@ -10,6 +10,7 @@ import numpy as np
 from numba import njit
 import scipy.sparse as sp
 from skfem import FacetBasis, InteriorFacetBasis
+from skfem.assembly import Dofs
 
 from .equations import embed
 from .kernel_cache import kernel_factory, scratch
@@ -142,6 +143,9 @@ def interior_faces(mesh, element, pointwise=False, intorder=None, coordinates=Tr
     trace = _point_trace if pointwise else _average_trace
     interior = np.nonzero(mesh.f2t[1] != -1)[0].astype(np.int32)     # scikit-fem's own default
     parts = []
+    # one numbering of the dofs for every chunk, and no global dof locations: scikit-fem would
+    # otherwise compute both over the whole mesh for each basis (set-up time quadratic in the cells)
+    kw.update(dofs=Dofs(mesh, element), disable_doflocs=True)
     for chunk in np.array_split(interior, max(1, -(-len(interior) // FACET_CHUNK))):
         fb = [InteriorFacetBasis(mesh, element, side=i, facets=chunk, **kw) for i in (0, 1)]
         T_L, measure = trace(fb[0])

@@ -10,6 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit
 from skfem import CellBasis
+from skfem.assembly import Dofs
 
 from skdgmpm import forms
 
@@ -89,6 +90,7 @@ def particle_operators(grid, particles, element=None):
     sorted_slot = slot[order]
     del slot
     n_chunks = max(1, -(-nel // CELL_CHUNK))
+    dof_numbering = Dofs(mesh, element)
     lumped = indptr = indices = data = None
     S_parts, nnz, row = [], 0, 0
     for c0, c1 in ((nel * k // n_chunks, nel * (k + 1) // n_chunks) for k in range(n_chunks)):
@@ -98,8 +100,10 @@ def particle_operators(grid, particles, element=None):
         Xe[:, sorted_slot[a:b] - c0 * nq] = particles.xi[order[a:b]].T
         W = np.zeros(m * nq)
         W[sorted_slot[a:b] - c0 * nq] = particles.volume[order[a:b]]
+        # one dof numbering for all the chunks and no global dof locations (scikit-fem would
+        # compute both over the whole mesh for each chunk: quadratic in the cells)
         basis = CellBasis(mesh, element, quadrature=(Xe.reshape(d, m, nq), np.ones((m, nq))),
-                          elements=np.arange(c0, c1))
+                          elements=np.arange(c0, c1), dofs=dof_numbering, disable_doflocs=True)
         basis.dx = W.reshape(m, nq)         # volumes as weights, replacing w_q |det J|
         del Xe, W
         dofs = basis.element_dofs
