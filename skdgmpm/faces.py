@@ -10,6 +10,7 @@ import numpy as np
 from numba import njit
 import scipy.sparse as sp
 from skfem import FacetBasis, InteriorFacetBasis
+from skfem.assembly import Dofs
 
 from .equations import embed
 from .kernel_cache import kernel_factory, scratch
@@ -119,11 +120,13 @@ class FaceSet:
         return out
 
 
-def _rows(fb, pointwise):
-    """Per-row facet index, normal, cell and coordinates: one row per face (its centre of
-    quadrature) or per facet quadrature point."""
+def _rows(fb, pointwise, coordinates=True):
+    """Per-row facet index, normal, cell and coordinates (None unless ``coordinates``): one row
+    per face (its centre of quadrature) or per facet quadrature point."""
     nq = fb.dx.shape[1] if pointwise else 1
     normal = fb.normals[:, :, :nq].reshape(fb.normals.shape[0], -1).T.copy()
+    if not coordinates:
+        return np.repeat(fb.find, nq), normal, np.repeat(fb.tind, nq), None
     X = np.asarray(fb.global_coordinates())                              # (d, nf, nqp)
     X = X.reshape(X.shape[0], -1).T if pointwise else np.einsum("dfq,fq->fd", X, fb.dx) / fb.dx.sum(1)[:, None]
     return np.repeat(fb.find, nq), normal, np.repeat(fb.tind, nq), X
@@ -132,8 +135,9 @@ def _rows(fb, pointwise):
 FACET_CHUNK = 16384     # interior facets per pair of facet bases (their arrays are the set-up's peak)
 
 
-def interior_faces(mesh, element, pointwise=False, intorder=None):
-    """Interior faces: one row per face (side averages) or per facet Gauss point (``pointwise``).
+def interior_faces(mesh, element, pointwise=False, intorder=None, coordinates=True):
+    """Interior faces: one row per face (side averages) or per facet Gauss point (``pointwise``);
+    ``coordinates=False`` leaves their reference coordinates X out (None: 16 B per row).
     The facet bases are built for FACET_CHUNK facets at a time and dropped (with the Jacobians
     scikit-fem memoises for them): each facet's rows depend on that facet alone, so the result is
     the same as from one pair of bases over all of them, at a fraction of the peak memory."""
@@ -141,12 +145,15 @@ def interior_faces(mesh, element, pointwise=False, intorder=None):
     trace = _point_trace if pointwise else _average_trace
     interior = np.nonzero(mesh.f2t[1] != -1)[0].astype(np.int32)     # scikit-fem's own default
     parts = []
+    # one numbering of the dofs for every chunk, and no global dof locations: scikit-fem would
+    # otherwise compute both over the whole mesh for each basis (set-up time quadratic in the cells)
+    kw.update(dofs=Dofs(mesh, element), disable_doflocs=True)
     for chunk in np.array_split(interior, max(1, -(-len(interior) // FACET_CHUNK))):
         fb = [InteriorFacetBasis(mesh, element, side=i, facets=chunk, **kw) for i in (0, 1)]
         T_L, measure = trace(fb[0])
         T_R, _ = trace(fb[1])
-        facets, normal, cell_L, X = _rows(fb[0], pointwise)
-        parts.append((facets, normal, measure, cell_L, _rows(fb[1], pointwise)[2], T_L, T_R, X))
+        facets, normal, cell_L, X = _rows(fb[0], pointwise, coordinates)
+        parts.append((facets, normal, measure, cell_L, _rows(fb[1], pointwise, False)[2], T_L, T_R, X))
         del fb
         mapping = getattr(mesh, "_cached_mapping", None)
         if len(interior) > FACET_CHUNK and isinstance(getattr(mapping, "_cache", None), dict):
@@ -156,7 +163,7 @@ def interior_faces(mesh, element, pointwise=False, intorder=None):
     column = list(zip(*parts))
     stack = lambda k: np.concatenate(column[k])                      # noqa: E731
     return FaceSet(stack(0), stack(1), stack(2), stack(3), stack(4), sp.vstack(column[5], format="csr"),
-                   sp.vstack(column[6], format="csr"), stack(7))
+                   sp.vstack(column[6], format="csr"), stack(7) if coordinates else None)
 
 
 def boundary_faces(mesh, element, facets, n_dofs, pointwise=False, intorder=None):

@@ -209,6 +209,8 @@ class Grid:
         named = np.concatenate([np.zeros(0, np.int64), *sub.boundaries.values()]) if names else []
         surface = np.setdiff1d(sub.boundary_facets(), named)
         self.submesh = sub.with_boundaries({**(sub.boundaries or {}), SURFACE: surface})
+        for cache in ("_facets", "_t2f", "_f2t"):     # the full mesh's facets, computed again if asked
+            self.mesh.__dict__.pop(cache, None)        # for (48 B per cell: the sub-mesh has its own)
         self.element = (ElementDG(ElementLineP1()) if self.dim == 1
                         else ElementQuadDG(ElementQuad1()))
 

@@ -10,6 +10,7 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit
 from skfem import CellBasis
+from skfem.assembly import Dofs
 
 from skdgmpm import forms
 
@@ -61,6 +62,113 @@ def interpolation_matrix(basis, slot):
         vals.append(phi[slot])
     return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                          shape=(len(slot), basis.N))
+
+
+CELL_CHUNK = 16384      # cells per particle basis in `particle_operators` (its arrays were the set-up's peak)
+
+
+def particle_operators(grid, particles, element=None):
+    """What first-order DGMPM keeps of the particle quadrature, built a chunk of cells at a time:
+    the lumped mass (n_dofs,), the K^alpha as a `system.Stiffness`, S (`interpolation_matrix`) and
+    the cell of each dof (n_dofs,) int32.
+
+    The same numbers as `particle_basis`, `VolumeOperators.assemble` and `interpolation_matrix`
+    over all the cells at once, bit for bit (tests/test_quadrature.py): every cell's entries are
+    computed by scikit-fem from that cell alone (the padding to the same number of points per
+    cell is kept), and a DG row couples the dofs of one cell only, so the rows of a chunk of
+    cells are whole rows of the matrices, put in place with the same scipy conversions. Each
+    chunk's basis (its points, basis values, gradients and the Jacobians scikit-fem memoises) is
+    dropped before the next: the peak is a chunk's, not the grid's (~2.1 kB per cell at 512^2
+    with one basis over all the cells), and the mass matrix itself is never kept."""
+    from .system import Stiffness
+
+    mesh = grid.submesh
+    element = element or grid.element
+    nel, d = mesh.nelements, grid.dim
+    nq, slot = cell_slots(particles.cell, nel)
+    order = np.argsort(slot, kind="stable")          # the particles by (cell, point in the cell)
+    sorted_slot = slot[order]
+    del slot
+    n_chunks = max(1, -(-nel // CELL_CHUNK))
+    dof_numbering = Dofs(mesh, element)
+    lumped = indptr = indices = data = None
+    S_parts, nnz, row = [], 0, 0
+    for c0, c1 in ((nel * k // n_chunks, nel * (k + 1) // n_chunks) for k in range(n_chunks)):
+        a, b = np.searchsorted(sorted_slot, [c0 * nq, c1 * nq])
+        m = c1 - c0
+        Xe = np.full((d, m * nq), 0.5)
+        Xe[:, sorted_slot[a:b] - c0 * nq] = particles.xi[order[a:b]].T
+        W = np.zeros(m * nq)
+        W[sorted_slot[a:b] - c0 * nq] = particles.volume[order[a:b]]
+        # one dof numbering for all the chunks and no global dof locations (scikit-fem would
+        # compute both over the whole mesh for each chunk: quadratic in the cells)
+        basis = CellBasis(mesh, element, quadrature=(Xe.reshape(d, m, nq), np.ones((m, nq))),
+                          elements=np.arange(c0, c1), dofs=dof_numbering, disable_doflocs=True)
+        basis.dx = W.reshape(m, nq)         # volumes as weights, replacing w_q |det J|
+        del Xe, W
+        dofs = basis.element_dofs
+        r0, r1 = int(dofs.min()), int(dofs.max()) + 1
+        if r0 != row or r1 - r0 != dofs.size:          # DG: a chunk's rows follow the previous chunk's
+            raise AssertionError("particle_operators: the cells' dofs are not numbered cell by cell")
+        if lumped is None:
+            N = basis.N
+            lumped = np.zeros(N)
+            dof_cell = np.empty(N, dtype=np.int32)
+            indptr = np.zeros(N + 1, dtype=np.int64)
+            bound = basis.Nbfun ** 2 * nel                # at most every pair of a cell's dofs
+            indices = np.empty(bound, dtype=np.int64)
+            data = np.empty((d, bound))
+        dof_cell[dofs] = np.arange(c0, c1, dtype=np.int32)[None, :]
+        mass_rows = _rows_of(forms.mass, basis, r0, r1)
+        lumped[r0:r1] = np.asarray(mass_rows.sum(axis=1)).ravel()
+        del mass_rows
+        Ks = common_pattern([_rows_of(forms.pseudo_stiffness(al), basis, r0, r1) for al in range(d)])
+        k = Ks[0].nnz
+        indptr[r0 + 1:r1 + 1] = nnz + Ks[0].indptr[1:]
+        indices[nnz:nnz + k] = Ks[0].indices
+        for al in range(d):
+            data[al, nnz:nnz + k] = Ks[al].data
+        nnz, row = nnz + k, r1
+        del Ks
+        # S's rows of the chunk's particles (sorted by cell), as `interpolation_matrix` builds them
+        local = sorted_slot[a:b] - c0 * nq
+        rows, cols, vals = [], [], []
+        for j in range(basis.Nbfun):
+            rows.append(np.arange(b - a))
+            cols.append(np.repeat(dofs[j], nq)[local])
+            vals.append(np.asarray(basis.basis[j][0]).reshape(-1)[local])
+        S_parts.append(sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                                     shape=(b - a, N)))
+        del basis, rows, cols, vals
+        _forget_jacobians(mesh)
+    if row != N:
+        raise AssertionError("particle_operators: not every dof belongs to a cell")
+    S = S_parts[0] if len(S_parts) == 1 else sp.vstack(S_parts, format="csr")
+    del S_parts
+    if not np.array_equal(order, np.arange(len(order))):        # back to the particles' order
+        S = S[np.argsort(order)]
+    # scipy's index dtype for such a matrix (int32 where it fits), arrays of the exact size
+    idx = np.int32 if max(N, nnz) <= np.iinfo(np.int32).max else np.int64
+    indices = indices[:nnz].astype(idx)
+    data = data[:, :nnz].copy() if nnz < data.shape[1] else data
+    stiffness = Stiffness.from_arrays(indptr.astype(idx), indices, data, (N, N))
+    return lumped, stiffness, S, dof_cell
+
+
+def _rows_of(form, basis, r0, r1):
+    """Rows r0:r1 of ``form.assemble(basis)`` (a basis over some cells), renumbered from 0:
+    scikit-fem's own COO -> CSR conversion (zeros dropped, duplicates summed, indices sorted)."""
+    (rows, cols), data, shape, _ = form._assemble(basis)
+    K = sp.coo_matrix((data, (rows - r0, cols)), shape=(r1 - r0, shape[1]))
+    K.eliminate_zeros()
+    return K.tocsr()
+
+
+def _forget_jacobians(mesh):
+    """Drop what scikit-fem's isoparametric mapping memoised for the bases built so far."""
+    mapping = getattr(mesh, "_cached_mapping", None)
+    if isinstance(getattr(mapping, "_cache", None), dict):
+        mapping._cache.clear()
 
 
 @dataclass(frozen=True)

@@ -121,6 +121,13 @@ class Stiffness(tuple):
         self.shape = matrices[0].shape                  # (rows, columns) of each K^alpha
         return self
 
+    @classmethod
+    def from_arrays(cls, indptr, indices, data, shape):
+        """From the arrays themselves, (d, nnz) data, kept as they are (no copy)."""
+        self = super().__new__(cls, (indptr, indices, data))
+        self.shape = shape
+        return self
+
 
 def volume_flux(Q, stiffness, out=None):
     """sum_alpha K^alpha F_alpha(Q) for nodal Q (n_dofs, d*d + d) [R18 eq 19], added to ``out`` if

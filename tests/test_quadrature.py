@@ -96,3 +96,40 @@ def test_inactive_cells_carry_no_dofs_and_body_boundary_is_named_surface():
     mid = grid.submesh.p[:, grid.submesh.facets[:, surface]].mean(axis=1)
     assert np.allclose(mid[0], 2.0) and len(surface) == 1     # the face between active and empty
     assert len(grid.submesh.boundaries["right"]) == 0
+
+
+@pytest.mark.parametrize("d", [1, 2])
+def test_chunked_particle_operators_are_the_whole_grid_ones(monkeypatch, d):
+    """`particle_operators` (a chunk of cells at a time, to bound the set-up's memory) gives the
+    lumped mass, the K^alpha on their common pattern and S of one particle basis over all the
+    cells, bit for bit: a distorted grid, cells holding 1-9 particles (padding), the particles in
+    shuffled order."""
+    from skdgmpm import quadrature
+    from skdgmpm.quadrature import common_pattern, particle_operators
+
+    if d == 1:
+        mesh = line(1.0, 23)
+    else:
+        mesh = rectangle(2.0, 1.0, 9, 7).morphed(lambda x: x[0] + 0.1 * np.sin(3 * x[1]),
+                                                 lambda x: x[1] + 0.05 * x[0] ** 2)
+    grid = Grid(mesh, np.arange(mesh.nelements))
+    full = particles_in(grid, tensor_layout([0.15, 0.5, 0.8], d))
+    rng = np.random.default_rng(3)
+    keep = rng.random(len(full.X)) < 0.5
+    keep[np.unique(full.cell, return_index=True)[1]] = True             # every cell keeps one
+    order = rng.permutation(np.flatnonzero(keep))
+    p = Particles(full.X[order], full.xi[order], full.cell[order], full.volume[order], full.rho0[order],
+                  full.material[order])
+    basis, slot = particle_basis(grid, p)
+    ops = VolumeOperators.assemble(basis)
+    S = interpolation_matrix(basis, slot)
+    K = common_pattern(ops.stiffness)
+    monkeypatch.setattr(quadrature, "CELL_CHUNK", 5)                      # many chunks of unequal length
+    lumped, stiffness, S_c, dof_cell = particle_operators(grid, p)
+    assert np.array_equal(lumped, ops.lumped)
+    assert np.array_equal(stiffness[0], K[0].indptr) and np.array_equal(stiffness[1], K[0].indices)
+    assert np.array_equal(stiffness[2], np.stack([k.data for k in K]))
+    assert stiffness[0].dtype == K[0].indptr.dtype and stiffness[1].dtype == K[0].indices.dtype
+    for a, b in ((S.indptr, S_c.indptr), (S.indices, S_c.indices), (S.data, S_c.data)):
+        assert np.array_equal(a, b) and a.dtype == b.dtype
+    assert np.array_equal(dof_cell[basis.element_dofs], np.broadcast_to(np.arange(basis.nelems), basis.element_dofs.shape))
