@@ -30,8 +30,8 @@ import scipy.sparse as sp
 from skdgmpm.materials.points import law_table
 
 from . import parallel, system
-from .dgmpm_kernels import (boundary_edge_corrections, boundary_pass, boundary_sides, cell_records, euler_update,
-                            integrate_faces, interior_pass, record_width)
+from .dgmpm_kernels import (boundary_edge_corrections, boundary_pass, boundary_sides, cell_records, edge_corrections,
+                            euler_update, integrate_faces, interior_pass, record_width)
 from .errors import InputError
 from .faces import interior_faces
 from .integrators import INTEGRATORS
@@ -168,7 +168,6 @@ class DGMPM(GodunovScheme):
         f, nc = self.interior, grid_state.U.shape[1]
         ctu = self.ctu is not None
         flux, corr, corr_bnd = np.empty((len(f), nc)), np.zeros((len(f), nc)), np.zeros((len(self.boundary), nc))
-        G = np.empty((len(f) if ctu else 0, 4, nc))
         T_L, T_R, rho, laws = self.traces["L"], self.traces["R"], self.map.rho, self.laws
         (h_L, n_L), (h_R, n_R) = self.split_topology["L"], self.split_topology["R"]
         csr = parallel.csr_rows
@@ -181,6 +180,10 @@ class DGMPM(GodunovScheme):
             dofs[lo:hi], grid_state.U, grid_state.Q, rho, self.cell_material[lo:hi], *laws, normals[lo:hi], rec[lo:hi],
             state[lo:hi]))
         recorded = bool(np.all(state != 0))         # one particle per cell: the faces read no trace
+        # CTU: with every cell recorded, the faces keep their fluctuations (nf, 2, nc) and each edge
+        # splits those it receives (`edge_corrections`); otherwise the faces split them and keep
+        # the parts (nf, 4, nc), which each edge gathers
+        G = np.empty((len(f) if ctu else 0, 2 if recorded else 4, nc))
 
         def faces(lo, hi):
             sl = slice(lo, hi) if ctu else slice(0, 0)
@@ -191,7 +194,11 @@ class DGMPM(GodunovScheme):
         bad = parallel.first_bad(len(f), faces)
         if bad >= 0:
             _not_hyperbolic(bad)
-        if ctu:
+        if ctu and recorded:
+            sides = (f.cell_L, f.cell_R, k_L, k_R, self.split_topology["L"], self.split_topology["R"])
+            parallel.rows(len(f), lambda lo, hi: edge_corrections(
+                self.to_interior, self.to_boundary, G, rec, normals.shape[1], sides, corr, corr_bnd, lo, hi))
+        elif ctu:
             parts = G.reshape(-1, nc)               # each edge: sum_k sign_k G[part_k], in face order
             gather_rows(self.to_interior, parts, corr)
             boundary_edge_corrections(self.to_boundary, parts, corr_bnd)

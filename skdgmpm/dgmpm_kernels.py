@@ -31,7 +31,7 @@ from numba import njit
 
 from skdgmpm.materials.points import tangent_call, tangent_point
 
-from .equations import add_normal_flux, ctu_parts, ctu_split, embed, fluctuations, godunov, impedance, traction
+from .equations import add_normal_flux, ctu_part, ctu_parts, ctu_split, embed, fluctuations, godunov, impedance, traction
 from .faces import gather_row
 from .kernel_cache import kernel_factory, scratch
 from .system import DIMENSION, volume_row
@@ -265,7 +265,11 @@ def _interior_pass(d, slots, recorded):     # literals: the loops unrolled, the 
             add_normal_flux(t_s, v_s, n, 1.0, o, d)
             for k in range(nc):
                 flux[f, k] = o[k]
-            if d == 2 and ctu:              # fluctuations A- dQ into L, A+ dQ into R, split at once
+            if d == 2 and ctu and recorded:     # the fluctuations kept: each edge splits those it receives
+                fluctuations(s_L, s_R, n, t_L, t_R, o, w_L, w_R, d)
+                for k in range(nc):
+                    G[f, 0, k], G[f, 1, k] = w_L[k], w_R[k]
+            elif d == 2 and ctu:            # fluctuations A- dQ into L, A+ dQ into R, split at once
                 fluctuations(s_L, s_R, n, t_L, t_R, o, w_L, w_R, d)
                 _record_tangent(s_L, C_L, d)
                 _record_tangent(s_R, C_R, d)
@@ -287,6 +291,76 @@ def _split_into(w, C, r, k, topo, f, G, part, slots):
     for c in range(6):
         G[f, part, c] = G_0[c]
         G[f, part + 1, c] = G_1[c]
+
+
+# ---------------------------------------------------------------- CTU parts gathered by the edges
+def edge_corrections(to_interior, to_boundary, W, rec, slots, faces, corr, corr_bnd, lo, hi):
+    """The CTU corrections per unit Delta t that interior edges lo:hi receive, into corr[lo:hi]
+    (sum_k sign_k part_k in the order of their CSR rows, as the gather of the parts written at the
+    faces sums them: the same bits), from the fluctuations W (nf, 2, 6) entering recorded cells;
+    with lo = 0, also the boundary edges' (`boundary_edge_corrections`). A part p = 4 f + 2 side
+    + e (`DGMPM._edge_gathers`) is `equations.ctu_part` of W[f, side] for the cell's edge e
+    adjacent to face f (local face k + 1 + 2 e) with the cell's record (its tangent, 1 / rho, the
+    impedance along that edge), per unit Delta t: the number `interior_pass` writes as that part
+    when it splits at the face. faces = (cell_L, cell_R, local face in L, in R, (h, normals) of
+    side L, of side R)."""
+    cell_L, cell_R, k_L, k_R, (h_L, n_L), (h_R, n_R) = faces
+    _edge_corrections(slots)(to_interior, to_boundary, W, rec, cell_L, cell_R, k_L, k_R, h_L, n_L, h_R, n_R, corr,
+                             corr_bnd, lo, hi)
+
+
+@kernel_factory
+def _edge_corrections(slots):
+    def edge_corrections(to_interior, to_boundary, W, rec, cell_L, cell_R, k_L, k_R, h_L, n_L, h_R, n_R, corr,
+                         corr_bnd, lo, hi):
+        # written out in the loop, not in an inlined helper: arrays handed to a helper are
+        # reference counted at each call where a branch follows
+        w, C, u, g_p = scratch((6,)), scratch((2, 2, 2, 2)), scratch((6,)), scratch((6,))
+        indptr, parts, sign = to_interior
+        indptr_b, parts_b, other_b = to_boundary
+        n_b = len(indptr_b) - 1 if lo == 0 else 0
+        for j in range(lo, hi + n_b):
+            interior = j < hi
+            for c in range(6):
+                u[c] = 0.0 if interior else corr_bnd[j - hi, c]
+            start, stop = (indptr[j], indptr[j + 1]) if interior else (indptr_b[j - hi], indptr_b[j - hi + 1])
+            for k in range(start, stop):
+                for q in range(1 if interior else 2):   # a boundary edge: its part less the opposite edge's
+                    p = parts[k] if interior else (parts_b[k] if q == 0 else other_b[k])
+                    f, side, e = p // 4, (p // 2) % 2, p % 2
+                    if side == 0:
+                        cell, kf, h, a0, a1 = cell_L[f], k_L[f], h_L[f], n_L[f, e, 0], n_L[f, e, 1]
+                    else:
+                        cell, kf, h, a0, a1 = cell_R[f], k_R[f], h_R[f], n_R[f, e, 0], n_R[f, e, 1]
+                    for i in range(6):
+                        w[i] = W[f, side, i]
+                    o = 7
+                    for i in range(2):
+                        for a in range(2):
+                            for jj in range(2):
+                                for b in range(2):
+                                    C[i, a, jj, b] = rec[cell, o]
+                                    o += 1
+                    z = 23 + 8 * (((kf + 1 + 2 * e) % 4) % slots)
+                    g = ctu_part(w, C, rec[cell, 6], -1.0 / (2.0 * h), a0, a1,
+                                 (rec[cell, z], rec[cell, z + 1], rec[cell, z + 2], rec[cell, z + 3], rec[cell, z + 4],
+                                  rec[cell, z + 5], rec[cell, z + 6], rec[cell, z + 7]))
+                    if interior:
+                        s = sign[k]
+                        for c in range(6):
+                            u[c] += s * g[c]
+                    elif q == 0:
+                        for c in range(6):
+                            g_p[c] = g[c]
+                    else:                       # as `boundary_edge_corrections` adds them
+                        for c in range(6):
+                            u[c] += g_p[c] - g[c]
+            for c in range(6):
+                if interior:
+                    corr[j, c] = u[c]
+                else:
+                    corr_bnd[j - hi, c] = u[c]
+    return edge_corrections
 
 
 @njit(cache=True, nogil=True)
