@@ -170,10 +170,20 @@ def _weights(d, m):                     # literal d and nodes per axis (2: hat, 
 
 @dataclass
 class ShapeFunctions:
-    """S (n_particles, n_nodes) and its gradient, ``grad[k]`` = dS/dx_k, all CSR."""
+    """S (n_particles, n_nodes) and its gradient, ``grad[k]`` = dS/dx_k, all CSR on one pattern,
+    and that pattern transposed (`parallel.Transposed`) for the nodes' sums over their particles."""
 
     S: sp.csr_matrix
     grad: list
+    pattern_T: parallel.Transposed = None
+
+    def S_T(self, X, scale=None):
+        """S^T diag(scale) X (`parallel.matmul_T`: the bits of scipy's S.T @ (scale X))."""
+        return parallel.matmul_T(self.pattern_T, self.S.data, X, scale=scale)
+
+    def grad_T(self, k, X):
+        """(dS/dx_k)^T X."""
+        return parallel.matmul_T(self.pattern_T, self.grad[k].data, X)
 
 
 def shape_functions(lattice, x, kind, lp=None, step=None, time=None):
@@ -193,13 +203,15 @@ def shape_functions(lattice, x, kind, lp=None, step=None, time=None):
     s = np.ascontiguousarray(np.clip(s, 0.0, np.array(lattice.shape) - 1))
     n, m = len(x), 2 if kind == "hat" else 3
     lp = np.zeros((n, d)) if kind == "hat" else np.ascontiguousarray(lp / lattice.h)
-    cols, S, G = np.empty((n, m ** d), np.int64), np.empty((n, m ** d)), np.empty((d, n, m ** d))
+    cols, W = np.empty((n, m ** d), np.int64), np.empty((1 + d, n, m ** d))       # W: S, then grad
     kernel, shape = _weights(d, m), np.array(lattice.shape, dtype=np.int64)
     parallel.rows(n, lambda lo, hi: kernel(s[lo:hi], lp[lo:hi], shape, lattice.h, lattice.node, cols[lo:hi],
-                                           S[lo:hi], G[:, lo:hi]))
+                                           W[0, lo:hi], W[1:, lo:hi]))
     indptr = np.arange(0, n * m ** d + 1, m ** d)
+    W, cols = W.reshape(1 + d, -1), cols.reshape(-1)
 
     def csr(values):                                # m^d entries per row, in the order of cols
-        return sp.csr_matrix((values.ravel(), cols.ravel(), indptr), shape=(n, lattice.n_nodes))
+        return sp.csr_matrix((values, cols, indptr), shape=(n, lattice.n_nodes), copy=False)
 
-    return ShapeFunctions(csr(S), [csr(G[k]) for k in range(d)])
+    return ShapeFunctions(csr(W[0]), [csr(W[1 + k]) for k in range(d)],
+                          parallel.Transposed(indptr, cols, lattice.n_nodes))
