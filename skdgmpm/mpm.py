@@ -278,9 +278,10 @@ class MPM(GodunovScheme):
     @staticmethod
     def _gradient(s, v_grid):
         """L_p = sum_i v_i (x) grad S_ip (n, d, d): column a from the gradient's row gather."""
-        L = np.empty((len(s.x), s.v.shape[1], s.v.shape[1]))
-        for a, G in enumerate(s.shape.grad):
-            parallel.matmul(G, v_grid, out=L[:, :, a])
+        d = s.v.shape[1]
+        L = np.empty((len(s.x), d, d))
+        for a in range(d):
+            parallel.matmul(s.shape.matrix(1 + a), v_grid, out=L[:, :, a])
         return L
 
     @stage
@@ -321,9 +322,9 @@ class MPM(GodunovScheme):
     @stage
     def particle_update(self, s):
         """v_p += dt sum_i S_ip a_i (FLIP), x_p += dt sum_i S_ip v_i* (not in a linearised geometry)."""
-        s.v = s.v + s.dt * parallel.matmul(s.shape.S, s.a)
+        s.v = s.v + s.dt * parallel.matmul(s.shape.matrix(0), s.a)
         if self.geometry == "updated":
-            s.x = s.x + s.dt * parallel.matmul(s.shape.S, s.v_grid)
+            s.x = s.x + s.dt * parallel.matmul(s.shape.matrix(0), s.v_grid)
 
     @stage
     def reproject(self, s):
@@ -344,7 +345,10 @@ class MPM(GodunovScheme):
             c = max(np.sqrt(m.E / m.rho) for m in self.materials.materials)
             return min(self.cfl * self.h_min / c, dt_max)
         _, v = system.split(state.Q, self.d)
-        return min(self.cfl * self.h_min / np.max(state.speed + np.linalg.norm(v, axis=1)), dt_max)
+        kernel = _fastest(self.d)
+        chunks = parallel.rows(len(v), lambda lo, hi: kernel(state.speed[lo:hi], v[lo:hi]))
+        fastest = np.nan if any(c != c for c in chunks) else max(chunks)        # max is exact: any thread count
+        return min(self.cfl * self.h_min / fastest, dt_max)
 
     @property
     def stages(self):
@@ -357,8 +361,8 @@ class MPM(GodunovScheme):
 
         # dt from the state at the start of the step (no retry as in the Godunov schemes: with
         # |v| in the bound nearly every step would be taken twice)
-        s = StepData(state.t, self.time_step(state, dt_max), state.step, F.copy(), P.copy(), v.copy(),
-                     state.x.copy(), state.history)
+        # the stages replace F, P and v, never write into them: views of the state will do
+        s = StepData(state.t, self.time_step(state, dt_max), state.step, F, P, v, state.x.copy(), state.history)
         for stage in self.variant.stages:
             getattr(self, stage)(s)
         new = ParticleState(state.t + s.dt, system.join(s.F, self.particles.rho0[:, None] * s.v),
@@ -411,3 +415,21 @@ def _constraint_power(d):
                     s += 0.5 * (P_n[p, i, j] + P[p, i, j]) * g
             out[p] = volume[p] * s
     return constraint_power
+
+
+@kernel_factory
+def _fastest(d):
+    def fastest(speed, v):
+        """max_p (speed_p + |v_p|) (nan if one is nan; -inf for no particle)."""
+        out = -np.inf
+        for p in range(len(v)):
+            s = 0.0
+            for i in range(d):
+                s += v[p, i] * v[p, i]
+            x = speed[p] + np.sqrt(s)
+            if x > out or x != x:
+                out = x
+                if x != x:
+                    return x
+        return out
+    return fastest

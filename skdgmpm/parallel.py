@@ -180,7 +180,9 @@ class Transposed:
     """A^T for CSR matrices A (n, n_cols) on one pattern (indptr, indices), applied without being
     stored (`matmul_T`): the output rows (A's columns) split into chunks, each with the range of
     A's rows that reach it. Cheap to make (one pass over the pattern, in parallel): for a pattern
-    that changes every step (MPM's shape functions)."""
+    that changes every step (MPM's shape functions). Always right; fast where the rows reaching a
+    chunk are a narrow range (particles numbered cell by cell, as they are: at 256^2 the two
+    chunks' ranges overlap by ~1 % of the particles)."""
 
     def __init__(self, indptr, indices, n_cols):
         self.indptr, self.indices, self.n_cols = indptr, indices, n_cols

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from . import system
+from . import parallel, system
 from .bcs import FREE
 from .errors import InputError, InstabilityError
 from .faces import boundary_faces
@@ -64,7 +64,7 @@ class FaceStates:
     rho_R: np.ndarray = None
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _advance_positions(x, v_old, v_new, half_dt, out):
     for p in range(len(x)):
         for k in range(x.shape[1]):
@@ -74,8 +74,8 @@ def _advance_positions(x, v_old, v_new, half_dt, out):
 def advance_positions(state, v_new, dt, d):
     """x + dt (v_old + v_new) / 2: current positions of points that move with the material (one
     compiled pass: the velocities are strided views of Q)."""
-    out = np.empty_like(state.x)
-    _advance_positions(state.x, state.Q[:, d * d:], v_new, 0.5 * dt, out)
+    out, x, v_old = np.empty_like(state.x), state.x, state.Q[:, d * d:]
+    parallel.rows(len(x), lambda lo, hi: _advance_positions(x[lo:hi], v_old[lo:hi], v_new[lo:hi], 0.5 * dt, out[lo:hi]))
     return out
 
 
