@@ -225,7 +225,9 @@ class MPM(GodunovScheme):
     def shape_functions(self, s):
         """S_ip, grad S_ip at the current positions (cpGIMP: l_p from the current F)."""
         lp = half_lengths(self.shape, self.l0, s.F, self.lattice.h)
-        s.shape = shape_functions(self.lattice, s.x, self.shape, lp, step=s.step + 1, time=s.t)
+        s.shape = shape_functions(self.lattice, s.x, self.shape, lp, step=s.step + 1, time=s.t,
+                                  reuse=self.__dict__.pop("_last_shape", None))
+        self._last_shape = s.shape              # overwritten by the next step's
 
     @stage
     def project(self, s):

@@ -222,14 +222,18 @@ def matmul_T(A, data, X, out=None, add=False, scale=None):
 
 @njit(cache=True, nogil=True)
 def _row_ranges(indptr, indices, lo, starts, first, last):
-    """For rows lo + r of A: the first and last + 1 row reaching each column chunk."""
+    """For rows lo + r of A: the first and last + 1 row reaching each column chunk (kept in this
+    thread's own arrays while it runs: the chunks' outputs share a cache line)."""
+    f, l = first.copy(), last.copy()
     for r in range(len(indptr) - 1):
         for k in range(indptr[r], indptr[r + 1]):
             j, c = indices[k], 0
             while j >= starts[c + 1]:
                 c += 1
-            first[c] = min(first[c], lo + r)
-            last[c] = max(last[c], lo + r + 1)
+            f[c] = min(f[c], lo + r)
+            l[c] = max(l[c], lo + r + 1)
+    first[:] = f
+    last[:] = l
 
 
 @kernel_factory

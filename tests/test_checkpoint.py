@@ -142,7 +142,7 @@ def test_signals_from_outside_checkpoint_and_exit_75(tmp_path, signum):
 def test_a_step_changes_no_stepper_state_but_the_checkpointed_one():
     """What a step leaves changed on a stepper is in checkpoint.RUN_STATE or a cache rebuilt at the
     start of every step: nothing else needs to be in a checkpoint."""
-    caches = {"_kept", "history_n", "_repeated"}
+    caches = {"_kept", "history_n", "_repeated", "_last_shape"}
     for name, (scene, overrides) in {**CASES, "rk-dgfem": ("bar_elastic_1d", [
             "grid.cells=10", 'method.name="rk-dgfem"', 'method.integrator="rk2"', "method.order=1", "method.cfl=0.3",
             'method.limiter="barth-jespersen"'])}.items():
