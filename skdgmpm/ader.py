@@ -340,8 +340,7 @@ class ADERDGFEM(DGFEM):
                                 self.face_material[0], self.face_material[1], *self.laws, self.w_tau, flux)
         if bad >= 0:
             _not_hyperbolic(bad)
-        f.integrate(flux, "R", R)
-        f.integrate(flux, "L", R, sign=-1.0)
+        f.integrate_jump(flux, R)
         if not len(b):
             return 0.0
         F, Q = np.empty((n_t, len(b), d * d)), np.empty((n_t, len(b), nc))
@@ -358,7 +357,7 @@ class ADERDGFEM(DGFEM):
     @stage
     def advance(self, U, time, dt, Q_points=None):
         S = self.space_time_source(self.gauss, time, dt)       # predictor and corrector share it
-        u_hat, q_hat = self.predictor(self.B @ U, dt, S, Q_points)
+        u_hat, q_hat = self.predictor(parallel.matmul(self.B, U), dt, S, Q_points)
         return self.corrector(U, u_hat, q_hat, time, dt, S)
 
     def step(self, state, dt_max=np.inf):

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from . import parallel
 from .ader import ADERDGFEM
 from .errors import InputError
 from .mls import shape_functions
@@ -140,14 +141,14 @@ class ADERDGMPM(ADERDGFEM):
     @stage
     def project_particles(self, U_slots):
         """The grid image of the MLS field of the particles' U: its L2 projection onto the DG space."""
-        return self.project(self.E_gauss @ U_slots.reshape(-1, U_slots.shape[-1]))
+        return self.project(parallel.matmul(self.E_gauss, U_slots.reshape(-1, U_slots.shape[-1])))
 
     @stage
     def back_map(self, state, dofs, dofs_n):
         """U at the particles from the corrected dofs: PIC (S dofs) or FLIP (U_p + S (dofs - dofs_n))."""
         if self.backmap == "pic":
-            return self.S @ dofs
-        return state.U + self.S @ (dofs - dofs_n)
+            return parallel.matmul(self.S, dofs)
+        return state.U + parallel.matmul(self.S, dofs - dofs_n)
 
     def step(self, state, dt_max=np.inf):
         U_slots, Q_slots = self._padded(state.U), self._padded(state.Q)       # Q: the law at t_n

@@ -125,6 +125,7 @@ class DGFEM(GodunovScheme):
         grad = np.array([np.asarray(basis.basis[k][0].grad) for k in range(self.nb)])  # (nb, d, nel, nq)
         self._phi, self._grad = phi, grad
         self.B = _point_matrix(basis, phi)
+        self.B_T = self.B.T.tocsr()                 # the dofs' gathers over their points
         self.D = tuple(_point_matrix(basis, grad[:, a] * basis.dx[None]) for a in range(d))
         # sum_q D[q, i] F_alpha(Q_q) as a gather over each dof's points (`system.volume_flux`: F_alpha
         # is linear, each row summed in point order): the same sums as D^T F, rows in parallel
@@ -164,7 +165,7 @@ class DGFEM(GodunovScheme):
 
     def project(self, U_points):
         """L2 projection of point values onto the DG space (Gauss weights)."""
-        return self.apply_mass_inverse(self.B.T @ (self.gauss.volume[:, None] * U_points))
+        return self.apply_mass_inverse(self.source_integral(U_points))
 
     def point_state(self, U, cells, rho, history=None):
         """Q from U pointwise: P = P(F, history) with each cell's law, v = p / rho0."""
@@ -173,7 +174,7 @@ class DGFEM(GodunovScheme):
     @stage
     def gauss_state(self, U_dofs):
         """Q at the Gauss points from the dofs, with the internal variables of t_n there."""
-        return self.point_state(self.B @ U_dofs, self.gauss.cell, self.gauss.rho0, self.history_n)
+        return self.point_state(parallel.matmul(self.B, U_dofs), self.gauss.cell, self.gauss.rho0, self.history_n)
 
     history_n = None          # (n_gauss, n_history) internal variables of the step's t_n
 
@@ -182,9 +183,9 @@ class DGFEM(GodunovScheme):
         variables (they live at the Gauss points only), the trace of Q interpolated from the
         Gauss points (``grid_state.Q``, dofs)."""
         d = self.d
-        U = T @ grid_state.U
+        U = parallel.matmul(T, grid_state.U)
         rho = self.rho_cell[cells]          # not a trace: ElementQuadP's basis is no partition of unity
-        Q = self.point_state(U, cells, rho) if grid_state.Q is None else T @ grid_state.Q
+        Q = self.point_state(U, cells, rho) if grid_state.Q is None else parallel.matmul(T, grid_state.Q)
         return Q, U[:, : d * d].reshape(-1, d, d), rho
 
     # ---------------------------------------------------------------- stages
@@ -198,8 +199,9 @@ class DGFEM(GodunovScheme):
         return system.volume_flux(Q, self.K_points)
 
     def source_integral(self, S):
-        """int Phi S from values S (n_points, nc) at the Gauss points (Gauss quadrature)."""
-        return self.B.T @ (self.gauss.volume[:, None] * S)
+        """int Phi S from values S (n_points, nc) at the Gauss points (Gauss quadrature): B^T (w S),
+        each dof summing its own points (`parallel.matmul` on B^T)."""
+        return parallel.matmul(self.B_T, S, scale=self.gauss.volume)
 
     def rate(self, U_dofs, time, dt):
         """dU/dt = M^-1 (volume + surface terms + source) and the boundary power."""
@@ -234,7 +236,7 @@ class DGFEM(GodunovScheme):
     @stage
     def evaluate_points(self, state, dofs, dt):
         """State at the Gauss points from the dofs; positions advanced with the new velocity."""
-        U = self.B @ dofs
+        U = parallel.matmul(self.B, dofs)
         Q, history = self.materials.update(U, self.cell_material[self.gauss.cell], self.gauss.rho0, state.history)
         v = Q[:, self.d * self.d:]
         new = ParticleState(state.t + dt, U, Q, advance_positions(state, v, dt, self.d), state.step + 1,
@@ -248,7 +250,7 @@ class DGFEM(GodunovScheme):
         U = system.join(F, self.gauss.rho0[:, None] * v)
         dofs = self.project(U)
         history = self.materials.initial_history(self.cell_material[self.gauss.cell])
-        state = ParticleState(t, self.B @ dofs, None, self.particles.X.copy(), dofs=dofs, history=history)
+        state = ParticleState(t, parallel.matmul(self.B, dofs), None, self.particles.X.copy(), dofs=dofs, history=history)
         state.Q = self.point_state(state.U, self.gauss.cell, self.gauss.rho0, history)
         self.check(state)
         return state

@@ -35,7 +35,7 @@ from .dgmpm_kernels import (boundary_edge_corrections, boundary_pass, boundary_s
 from .errors import InputError
 from .faces import interior_faces
 from .integrators import INTEGRATORS
-from .quadrature import ParticleMap, gather_rows, particle_operators
+from .quadrature import ParticleMap, particle_operators
 from .riemann import _not_hyperbolic
 from .scheme import GodunovScheme, GridState, cell_values, stage
 
@@ -94,11 +94,11 @@ class DGMPM(GodunovScheme):
         self._setup_cell_faces()
         self._setup_transverse()
         self.laws = law_table(self.materials.materials)          # the compiled point laws
-        self.traces = {"L": _csr(self.interior.T_L), "R": _csr(self.interior.T_R),
-                       "boundary": _csr(self.boundary.T_L)}
+        self.traces = {"L": parallel.csr(self.interior.T_L), "R": parallel.csr(self.interior.T_R),
+                       "boundary": parallel.csr(self.boundary.T_L)}
         # -int Phi F* over the interior faces as a gather over each node's faces (`euler_update`)
         f = self.interior
-        self.gather_interior = _csr((sp.diags(f.measure) @ (f.T_R - f.T_L)).T.tocsr())
+        self.gather_interior = parallel.csr((sp.diags(f.measure) @ (f.T_R - f.T_L)).T.tocsr())
         self.inv_M = 1.0 / lumped
 
     def _buffer(self, name, shape, dtype=float):
@@ -211,7 +211,7 @@ class DGMPM(GodunovScheme):
                 self.to_interior, self.to_boundary, G, rec, normals.shape[1], sides, corr, corr_bnd, lo, hi))
         elif ctu:
             parts = G.reshape(-1, nc)               # each edge: sum_k sign_k G[part_k], in face order
-            gather_rows(self.to_interior, parts, corr)
+            parallel.matmul(self.to_interior, parts, corr)
             boundary_edge_corrections(self.to_boundary, parts, corr_bnd)
         return flux, corr, corr_bnd
 
@@ -274,7 +274,7 @@ class DGMPM(GodunovScheme):
 
     def _edge_gathers(self, sides):
         """CSR rows, one per interior edge, of the parts (rows of `interior_pass`'s G flattened,
-        4 f + 2 side + e) that it receives and their signs (`quadrature.gather_rows`); and per
+        4 f + 2 side + e) that it receives and their signs (`parallel.matmul`); and per
         boundary edge, the parts and the opposite edge's parts (`boundary_edge_corrections`).
         Within a row the parts are in the order a loop over the faces meets them. The interior
         edges' rows are int32 indices and int8 signs (+-1, exact: the products are the same bits
@@ -346,8 +346,8 @@ class DGMPM(GodunovScheme):
             power = float(np.sum(b.measure * np.einsum("fi,fi->f", -p, v)))
         integrate_faces(self.traces["boundary"], b.measure, -1.0, flux, weight, out)
         if self.body_force is not None:          # int Phi rho0 b, the particles as quadrature
-            source = self.particles.volume[:, None] * self.source(self.particles, time)
-            out += (weight[0] * weight[1])[:, None] * (self.map.S.T @ source)
+            source = parallel.matmul(self.map.S_T, self.source(self.particles, time), scale=self.particles.volume)
+            out += (weight[0] * weight[1])[:, None] * source
         return power
 
     def euler_stage(self, grid_state, base, time, dt, step):
@@ -403,7 +403,3 @@ class DGMPM(GodunovScheme):
         finally:
             self._kept = None       # the projected state and its terms: not held between steps
 
-
-def _csr(T):
-    """(indptr, indices, data) of a CSR matrix, as the compiled passes take a trace."""
-    return (T.indptr, T.indices, T.data)

@@ -204,7 +204,7 @@ def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, p
     """Godunov flux of every interior face into flux (nf, nc) and, for ``ctu`` (2D), the
     transverse parts per unit Delta t of both sides' fluctuations into G (nf, 4, nc): side L's
     for its cell's two edges in G[:, 0:2], side R's in G[:, 2:4] (summed on the edges by a row
-    gather, `quadrature.gather_rows`: each face writes its own rows only). ``records`` = (rec,
+    gather, `parallel.matmul`: each face writes its own rows only). ``records`` = (rec,
     state, normals, local face of each face in cell L, in cell R) (`cell_records`): a side whose
     cell is recorded reads its record, another computes its trace's record. Returns the first face
     whose acoustic tensor is not positive definite, or -1."""

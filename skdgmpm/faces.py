@@ -12,21 +12,9 @@ import scipy.sparse as sp
 from skfem import FacetBasis, InteriorFacetBasis
 from skfem.assembly import Dofs
 
+from . import parallel
 from .equations import embed
-from .kernel_cache import kernel_factory, scratch
-
-
-@kernel_factory
-def _integrate(nc):                     # a literal width: the loop unrolled
-    def integrate(indptr, indices, data, measure, flux, out):
-        """out[i] += T[f, i] (measure[f] flux[f]) for the CSR rows f of a trace T, in face order
-        (as scipy's T.T @ (measure flux), without the temporaries)."""
-        for f in range(len(indptr) - 1):
-            for k in range(indptr[f], indptr[f + 1]):
-                i, w = indices[k], data[k]
-                for c in range(nc):
-                    out[i, c] += w * (measure[f] * flux[f, c])
-    return integrate
+from .kernel_cache import scratch
 
 
 @njit(cache=True, inline="always")
@@ -112,12 +100,29 @@ class FaceSet:
 
     def integrate(self, flux, side="L", out=None, sign=1.0):
         """``sign int_Gamma Phi_i F*`` on the given side for face-constant ``flux`` (nf, ncomp),
-        added to ``out`` (n_dofs, ncomp) if given (no temporaries)."""
-        T = self.T_L if side == "L" else self.T_R
-        if out is None:
-            out = np.zeros((T.shape[1], flux.shape[1]))
-        _integrate(flux.shape[1])(T.indptr, T.indices, T.data, sign * self.measure, flux, out)
-        return out
+        added to ``out`` (n_dofs, ncomp) if given: each dof sums its own rows' T[f, i] (measure[f]
+        flux[f]) in face order (`parallel.matmul` on T^T), the bits of scipy's T.T @ (measure flux)
+        or of the scatter into ``out``."""
+        return parallel.matmul(self._gather((side,), sign), flux, out, add=out is not None, scale=self.measure)
+
+    def integrate_jump(self, flux, out=None):
+        """``int_Gamma Phi_i F*`` on side R minus that on side L (what the interior faces add to
+        the residual of both their cells), added to ``out`` if given: one pass, each dof summing
+        its side-R rows, then its side-L ones, in face order: the bits of `integrate` on side R,
+        then on side L with sign -1, into ``out``."""
+        return parallel.matmul(self._gather(("R", "L"), 1.0), flux, out, add=out is not None, scale=self.measure)
+
+    def _gather(self, sides, sign):
+        """T_(sides[0])^T, -T_(sides[1])^T, ... side by side: (n_dofs, nf) rows of one CSR triple,
+        each dof's entries side by side, then in face order; made once, on first use."""
+        cache = self.__dict__.setdefault("_gathers", {})
+        key = (sides, sign)
+        if key not in cache:
+            parts = [(sign if k == 0 else -sign) * (self.T_L if side == "L" else self.T_R).T.tocsr()
+                     for k, side in enumerate(sides)]
+            G = sp.hstack(parts, format="csr") if len(parts) > 1 else parts[0]
+            cache[key] = (G.indptr, G.indices % max(len(self), 1), G.data)      # each part's columns: the rows
+        return cache[key]
 
 
 def _rows(fb, pointwise, coordinates=True):

@@ -141,17 +141,23 @@ def _axis_gimp(s, lp, n, k, nodes, w, dw):
 
 @kernel_factory
 def _weights(d, m):                     # literal d and nodes per axis (2: hat, 3: GIMP)
-    def weights(s, lp, shape, h, lattice, cols, S, G):
-        """Per particle p: the m^d columns and values of row p of S and of each dS/dx_k (G[k]),
-        the tensor product of the axes' weights in lattice order (the last axis fastest)."""
+    def weights(x, lp, origin, shape, h, lattice, cols, S, G):
+        """Per particle p at x[p] with half-lengths lp[p] (m): the m^d columns and values of row p
+        of S and of each dS/dx_k (G[k]), the tensor product of the axes' weights in lattice order
+        (the last axis fastest). Returns the first particle outside the grid (or not finite), or
+        -1."""
         nodes = np.empty((d, m), np.int64)
         w, dw = np.empty((d, m)), np.empty((d, m))
-        for p in range(len(s)):
+        for p in range(len(x)):
             for k in range(d):
+                s = (x[p, k] - origin[k]) / h[k]            # in spacings
+                if not (s >= -1e-12 and s <= shape[k] - 1 + 1e-12):
+                    return p
+                s = min(max(s, 0.0), shape[k] - 1.0)
                 if m == 2:
-                    _axis_hat(s[p, k], shape[k], k, nodes, w, dw)
+                    _axis_hat(s, shape[k], k, nodes, w, dw)
                 else:
-                    _axis_gimp(s[p, k], lp[p, k], shape[k], k, nodes, w, dw)
+                    _axis_gimp(s, lp[p, k] / h[k], shape[k], k, nodes, w, dw)
                 for j in range(m):
                     dw[k, j] = dw[k, j] / h[k]
             for e in range(m ** d):
@@ -165,41 +171,73 @@ def _weights(d, m):                     # literal d and nodes per axis (2: hat, 
                     S[p, e] = w[0, i0] * w[1, i1]
                     G[0, p, e] = dw[0, i0] * w[1, i1]
                     G[1, p, e] = w[0, i0] * dw[1, i1]
+        return -1
     return weights
 
 
 @dataclass
 class ShapeFunctions:
-    """S (n_particles, n_nodes) and its gradient, ``grad[k]`` = dS/dx_k, all CSR."""
+    """S (n_particles, n_nodes) and its gradient dS/dx_k on one CSR pattern (``indptr``,
+    ``cols``), their values stacked in ``values`` (1 + d, nnz): S, then the gradient; and that
+    pattern transposed (`parallel.Transposed`) for the nodes' sums over their particles."""
 
-    S: sp.csr_matrix
-    grad: list
+    indptr: np.ndarray
+    cols: np.ndarray
+    values: np.ndarray
+    n_nodes: int
+    pattern_T: parallel.Transposed
+
+    def matrix(self, k):
+        """CSR triple of S (k = 0) or dS/dx_(k-1), for `parallel.matmul`."""
+        return self.indptr, self.cols, self.values[k]
+
+    @property
+    def S(self):
+        """S as a scipy CSR matrix (n_particles, n_nodes)."""
+        return sp.csr_matrix(self.matrix(0)[::-1], shape=(len(self.indptr) - 1, self.n_nodes))
+
+    @property
+    def grad(self):
+        """[dS/dx_k] as scipy CSR matrices."""
+        return [sp.csr_matrix(self.matrix(1 + k)[::-1], shape=(len(self.indptr) - 1, self.n_nodes))
+                for k in range(len(self.values) - 1)]
+
+    def S_T(self, X, scale=None):
+        """S^T diag(scale) X (`parallel.matmul_T`: the bits of scipy's S.T @ (scale X))."""
+        return parallel.matmul_T(self.pattern_T, self.values[0], X, scale=scale)
+
+    def grad_T(self, k, X):
+        """(dS/dx_k)^T X."""
+        return parallel.matmul_T(self.pattern_T, self.values[1 + k], X)
 
 
-def shape_functions(lattice, x, kind, lp=None, step=None, time=None):
-    """S_ip and grad S_ip at current positions ``x`` (n, d) with half-lengths ``lp`` (n, d).
+_NO_LENGTHS = np.zeros((0, 0))
+
+
+def shape_functions(lattice, x, kind, lp=None, step=None, time=None, reuse=None):
+    """S_ip and grad S_ip at current positions ``x`` (n, d) with half-lengths ``lp`` (n, d), in
+    one compiled pass over the particles (in parallel chunks). ``reuse``: shape functions no
+    longer needed (the last step's), whose arrays are overwritten rather than new ones taken
+    (~80 MB at 256^2: fresh pages cost a page fault each, and the faults of two threads queue).
 
     A particle outside the grid raises InstabilityError naming it (index, position, step, time).
     """
     d = lattice.dim
-    s = (x - lattice.origin) / lattice.h                  # (n, d), in spacings
-    outside = np.any((s < -1e-12) | (s > np.array(lattice.shape) - 1 + 1e-12) | ~np.isfinite(s), axis=1)
-    if outside.any():
-        p = int(np.flatnonzero(outside)[0])
+    n, m = len(x), 2 if kind == "hat" else 3
+    lp = _NO_LENGTHS if kind == "hat" else lp
+    if reuse is not None and reuse.values.shape == (1 + d, n * m ** d):
+        cols, W = reuse.cols.reshape(n, m ** d), reuse.values.reshape(1 + d, n, m ** d)
+    else:
+        cols, W = np.empty((n, m ** d), np.int64), np.empty((1 + d, n, m ** d))   # W: S, then grad
+    kernel, shape = _weights(d, m), np.array(lattice.shape, dtype=np.int64)
+    bad = parallel.first_bad(n, lambda lo, hi: kernel(x[lo:hi], lp[lo:hi], lattice.origin, shape, lattice.h,
+                                                      lattice.node, cols[lo:hi], W[0, lo:hi], W[1:, lo:hi]))
+    if bad >= 0:
         when = "" if step is None else f" at step {step}, t = {time:.6g} s"
         raise InstabilityError(
-            f"particle {p} at x = {np.round(x[p], 6).tolist()} is outside the background grid "
-            f"[{lattice.origin.tolist()}, {lattice.upper.tolist()}]{when}", step=step, time=time, particle=p)
-    s = np.ascontiguousarray(np.clip(s, 0.0, np.array(lattice.shape) - 1))
-    n, m = len(x), 2 if kind == "hat" else 3
-    lp = np.zeros((n, d)) if kind == "hat" else np.ascontiguousarray(lp / lattice.h)
-    cols, S, G = np.empty((n, m ** d), np.int64), np.empty((n, m ** d)), np.empty((d, n, m ** d))
-    kernel, shape = _weights(d, m), np.array(lattice.shape, dtype=np.int64)
-    parallel.rows(n, lambda lo, hi: kernel(s[lo:hi], lp[lo:hi], shape, lattice.h, lattice.node, cols[lo:hi],
-                                           S[lo:hi], G[:, lo:hi]))
+            f"particle {bad} at x = {np.round(x[bad], 6).tolist()} is outside the background grid "
+            f"[{lattice.origin.tolist()}, {lattice.upper.tolist()}]{when}", step=step, time=time, particle=bad)
     indptr = np.arange(0, n * m ** d + 1, m ** d)
-
-    def csr(values):                                # m^d entries per row, in the order of cols
-        return sp.csr_matrix((values.ravel(), cols.ravel(), indptr), shape=(n, lattice.n_nodes))
-
-    return ShapeFunctions(csr(S), [csr(G[k]) for k in range(d)])
+    cols = cols.reshape(-1)
+    return ShapeFunctions(indptr, cols, W.reshape(1 + d, -1), lattice.n_nodes,
+                          parallel.Transposed(indptr, cols, lattice.n_nodes))

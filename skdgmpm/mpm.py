@@ -24,10 +24,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import system
+from . import parallel, system
 from .bcs import Mixed, NormalVelocity, Transmissive
 from .errors import InputError
 from .gimp import SHAPES, Lattice, half_lengths, shape_functions
+from .kernel_cache import kernel_factory
 from .scheme import GodunovScheme, ParticleState, stage
 
 
@@ -224,17 +225,19 @@ class MPM(GodunovScheme):
     def shape_functions(self, s):
         """S_ip, grad S_ip at the current positions (cpGIMP: l_p from the current F)."""
         lp = half_lengths(self.shape, self.l0, s.F, self.lattice.h)
-        s.shape = shape_functions(self.lattice, s.x, self.shape, lp, step=s.step + 1, time=s.t)
+        s.shape = shape_functions(self.lattice, s.x, self.shape, lp, step=s.step + 1, time=s.t,
+                                  reuse=self.__dict__.pop("_last_shape", None))
+        self._last_shape = s.shape              # overwritten by the next step's
 
     @stage
     def project(self, s):
         """m_i = sum_p S_ip m_p, v_i = sum_p S_ip m_p v_p / m_i (zero on empty nodes)."""
         m = self.particles.mass
-        s.mass = s.shape.S.T @ m
+        s.mass = s.shape.S_T(m)
         # every node with mass takes part: grad S ~ sqrt(S) near the edge of a GIMP support, so
         # dropping nodes of small mass drops finite forces (and momentum conservation)
         s.filled = s.mass > 0
-        s.v_grid = self._per_mass(s, s.shape.S.T @ (m[:, None] * s.v))
+        s.v_grid = self._per_mass(s, s.shape.S_T(s.v, scale=m))
 
     @stage
     def impose_velocity(self, s):
@@ -247,9 +250,11 @@ class MPM(GodunovScheme):
     def strain_stress(self, s):
         """L_p = sum_i v_i (x) grad S_ip, F <- (I + dt L) F, P = P(F, history) with the history
         of t_n (the particles' internal variables: once per step in every variant)."""
-        L = np.stack([G @ s.v_grid for G in s.shape.grad], axis=2)          # (n, d, d)
+        L = self._gradient(s, s.v_grid)
         F_n, P_n = s.F, s.P
-        s.F = F_n + s.dt * L @ F_n
+        s.F = np.empty_like(F_n)
+        kernel = _deformation_update(self.d)
+        parallel.rows(len(F_n), lambda lo, hi: kernel(F_n[lo:hi], L[lo:hi], s.dt, s.F[lo:hi]))
         s.P, s.history = self.materials.stress_update(s.F, self.particles.material, s.history)
         s.work_constraints = self._constraint_work(s, F_n, P_n)
 
@@ -265,22 +270,40 @@ class MPM(GodunovScheme):
         if not self.constraints:
             return 0.0
         v_imposed = np.where(self.constrained, s.v_grid, 0.0)
-        LC = np.stack([G @ v_imposed for G in s.shape.grad], axis=2)        # (n, d, d)
-        P_mid = 0.5 * (P_n + s.P)
-        return s.dt * float(np.einsum("p,pij,pij->", self.particles.volume, P_mid, LC @ F_n))
+        LC = self._gradient(s, v_imposed)
+        power = np.empty(len(F_n))                  # per particle, summed once (any thread count)
+        kernel = _constraint_power(self.d)
+        parallel.rows(len(F_n), lambda lo, hi: kernel(self.particles.volume[lo:hi], P_n[lo:hi], s.P[lo:hi],
+                                                      LC[lo:hi], F_n[lo:hi], power[lo:hi]))
+        return s.dt * float(np.sum(power))
+
+    @staticmethod
+    def _gradient(s, v_grid):
+        """L_p = sum_i v_i (x) grad S_ip (n, d, d): column a from the gradient's row gather."""
+        d = s.v.shape[1]
+        L = np.empty((len(s.x), d, d))
+        for a in range(d):
+            parallel.matmul(s.shape.matrix(1 + a), v_grid, out=L[:, :, a])
+        return L
 
     @stage
     def grid_forces(self, s):
         """f_int,i = -sum_p sigma_p grad S_ip V_p (sigma V = P F^T V0), plus sum_p S_ip f_p of the
         body forces and the boundary tractions (at mid-step) carried by the particles."""
-        tau = np.einsum("pia,pja->pij", s.P, s.F) * self.particles.volume[:, None, None]
-        s.force = -sum(G.T @ tau[:, :, k] for k, G in enumerate(s.shape.grad))
-        carried = np.zeros_like(s.v)                   # (n, d) external forces on the particles
-        if self.body_force is not None:
-            carried += self.particles.mass[:, None] * self.body_force(self.particles.X, s.t)
-        for force, schedule in self.tractions:
-            carried += schedule(s.t + 0.5 * s.dt) * force
-        s.external = s.shape.S.T @ carried
+        tau = np.empty_like(s.P)                        # sigma V = P F^T V0 (n, d, d)
+        kernel = _kirchhoff(self.d)
+        parallel.rows(len(tau), lambda lo, hi: kernel(s.P[lo:hi], s.F[lo:hi], self.particles.volume[lo:hi],
+                                                      tau[lo:hi]))
+        s.force = -sum(s.shape.grad_T(k, tau[:, :, k]) for k in range(self.d))
+        if self.body_force is None and not self.tractions:
+            s.external = np.zeros_like(s.force)
+        else:
+            carried = np.zeros_like(s.v)               # (n, d) external forces on the particles
+            if self.body_force is not None:
+                carried += self.particles.mass[:, None] * self.body_force(self.particles.X, s.t)
+            for force, schedule in self.tractions:
+                carried += schedule(s.t + 0.5 * s.dt) * force
+            s.external = s.shape.S_T(carried)
         s.force += s.external
 
     @stage
@@ -301,15 +324,14 @@ class MPM(GodunovScheme):
     @stage
     def particle_update(self, s):
         """v_p += dt sum_i S_ip a_i (FLIP), x_p += dt sum_i S_ip v_i* (not in a linearised geometry)."""
-        s.v = s.v + s.dt * (s.shape.S @ s.a)
+        s.v = s.v + s.dt * parallel.matmul(s.shape.matrix(0), s.a)
         if self.geometry == "updated":
-            s.x = s.x + s.dt * (s.shape.S @ s.v_grid)
+            s.x = s.x + s.dt * parallel.matmul(s.shape.matrix(0), s.v_grid)
 
     @stage
     def reproject(self, s):
         """UVF: the updated particle velocities projected again (same S and m_i)."""
-        m = self.particles.mass
-        s.v_grid = self._per_mass(s, s.shape.S.T @ (m[:, None] * s.v))
+        s.v_grid = self._per_mass(s, s.shape.S_T(s.v, scale=self.particles.mass))
 
     @staticmethod
     def _per_mass(s, nodal):
@@ -325,7 +347,10 @@ class MPM(GodunovScheme):
             c = max(np.sqrt(m.E / m.rho) for m in self.materials.materials)
             return min(self.cfl * self.h_min / c, dt_max)
         _, v = system.split(state.Q, self.d)
-        return min(self.cfl * self.h_min / np.max(state.speed + np.linalg.norm(v, axis=1)), dt_max)
+        kernel = _fastest(self.d)
+        chunks = parallel.rows(len(v), lambda lo, hi: kernel(state.speed[lo:hi], v[lo:hi]))
+        fastest = np.nan if any(c != c for c in chunks) else max(chunks)        # max is exact: any thread count
+        return min(self.cfl * self.h_min / fastest, dt_max)
 
     @property
     def stages(self):
@@ -338,8 +363,8 @@ class MPM(GodunovScheme):
 
         # dt from the state at the start of the step (no retry as in the Godunov schemes: with
         # |v| in the bound nearly every step would be taken twice)
-        s = StepData(state.t, self.time_step(state, dt_max), state.step, F.copy(), P.copy(), v.copy(),
-                     state.x.copy(), state.history)
+        # the stages replace F, P and v, never write into them: views of the state will do
+        s = StepData(state.t, self.time_step(state, dt_max), state.step, F, P, v, state.x.copy(), state.history)
         for stage in self.variant.stages:
             getattr(self, stage)(s)
         new = ParticleState(state.t + s.dt, system.join(s.F, self.particles.rho0[:, None] * s.v),
@@ -347,3 +372,66 @@ class MPM(GodunovScheme):
         self.check(new)
         self.external_work += s.work + s.work_constraints
         return new
+
+
+# ---------------------------------------------------------------- per-particle passes (literal d)
+@kernel_factory
+def _deformation_update(d):
+    def deformation_update(F, L, dt, out):
+        """out = F + (dt L) F per particle (the bits of numpy's F + dt * L @ F)."""
+        for p in range(len(F)):
+            for i in range(d):
+                for j in range(d):
+                    s = 0.0
+                    for k in range(d):
+                        s += (dt * L[p, i, k]) * F[p, k, j]
+                    out[p, i, j] = F[p, i, j] + s
+    return deformation_update
+
+
+@kernel_factory
+def _kirchhoff(d):
+    def kirchhoff(P, F, volume, tau):
+        """tau = (P F^T) V0 per particle (the bits of einsum("pia,pja->pij", P, F) * V0)."""
+        for p in range(len(P)):
+            for i in range(d):
+                for j in range(d):
+                    s = 0.0
+                    for a in range(d):
+                        s += P[p, i, a] * F[p, j, a]
+                    tau[p, i, j] = s * volume[p]
+    return kirchhoff
+
+
+@kernel_factory
+def _constraint_power(d):
+    def constraint_power(volume, P_n, P, LC, F_n, out):
+        """out = V0 (P_n + P)/2 : (LC F_n) per particle."""
+        for p in range(len(P)):
+            s = 0.0
+            for i in range(d):
+                for j in range(d):
+                    g = 0.0
+                    for k in range(d):
+                        g += LC[p, i, k] * F_n[p, k, j]
+                    s += 0.5 * (P_n[p, i, j] + P[p, i, j]) * g
+            out[p] = volume[p] * s
+    return constraint_power
+
+
+@kernel_factory
+def _fastest(d):
+    def fastest(speed, v):
+        """max_p (speed_p + |v_p|) (nan if one is nan; -inf for no particle)."""
+        out = -np.inf
+        for p in range(len(v)):
+            s = 0.0
+            for i in range(d):
+                s += v[p, i] * v[p, i]
+            x = speed[p] + np.sqrt(s)
+            if x > out or x != x:
+                out = x
+                if x != x:
+                    return x
+        return out
+    return fastest

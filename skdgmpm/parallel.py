@@ -11,12 +11,24 @@ gather of its own, each row summing its terms in a fixed order. The kernels are 
     out = np.empty(...)
     parallel.rows(n, lambda lo, hi: kernel(rows(a, lo, hi), csr_rows(T, lo, hi), out[lo:hi]))
 
+Sparse products: `matmul` (CSR times dense, each output row its own sum, in CSR order, as
+scipy's product sums it) is the one product every step uses; a transposed product A^T X is a
+`matmul` with A^T stored as CSR at set-up (scipy's ``A.T.tocsr()``: each row's entries in the
+order of A's rows, as scipy's A.T @ X visits them), so a scatter into rows becomes a gather with
+the same bits; where A changes every step (MPM's shape functions), `matmul_T` applies A^T
+without storing it, each chunk of output rows scattering into its own rows only.
+
 The thread count: `set_threads` (the scene key ``run.threads``, ``skdgmpm run --threads``), else
 $SKDGMPM_THREADS, else every core this process may use. A loop shorter than `MIN_ROWS` per thread
 runs in the calling thread (small scenes pay nothing); study workers run one thread each.
 """
 import os
 from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+from numba import njit
+
+from .kernel_cache import kernel_factory, scratch
 
 MIN_ROWS = 2048         # rows per chunk below which a loop stays in one thread
 
@@ -66,25 +78,29 @@ def bounds(n, parts):
     return [(n * k // parts, n * (k + 1) // parts) for k in range(parts)]
 
 
+def chunks(n):
+    """The (lo, hi) chunks `rows` splits range(n) into."""
+    return bounds(n, min(threads(), max(1, n // MIN_ROWS)))
+
+
 def rows(n, call):
     """``call(lo, hi)`` over contiguous chunks of range(n), in parallel; returns the results in
     chunk order (the first chunk's first)."""
-    parts = min(threads(), max(1, n // MIN_ROWS))
-    if parts == 1:
+    parts = chunks(n)
+    if len(parts) == 1:
         return [call(0, n)]
     global _pool
     if _pool is None:
         _pool = ThreadPoolExecutor(max_workers=threads() - 1, thread_name_prefix="skdgmpm")
-    chunks = bounds(n, parts)
-    futures = [_pool.submit(call, lo, hi) for lo, hi in chunks[1:]]
-    first = call(*chunks[0])            # the calling thread takes the first chunk itself
+    futures = [_pool.submit(call, lo, hi) for lo, hi in parts[1:]]
+    first = call(*parts[0])             # the calling thread takes the first chunk itself
     return [first] + [f.result() for f in futures]
 
 
 def first_bad(n, call):
     """`rows` for a pass that returns the first failing row of its chunk (or -1): the first
     failing row of range(n), or -1 (the same as one serial pass would return)."""
-    for (lo, _), bad in zip(bounds(n, min(threads(), max(1, n // MIN_ROWS))), rows(n, call)):
+    for (lo, _), bad in zip(chunks(n), rows(n, call)):
         if bad >= 0:
             return lo + bad
     return -1
@@ -94,3 +110,146 @@ def csr_rows(matrix, lo, hi):
     """Rows lo:hi of a CSR triple (indptr, indices, data) (the offsets stay absolute)."""
     indptr, indices, data = matrix
     return indptr[lo:hi + 1], indices, data
+
+
+def csr(matrix):
+    """The CSR triple (indptr, indices, data) of a scipy CSR matrix (a triple as it is)."""
+    return matrix if isinstance(matrix, tuple) else (matrix.indptr, matrix.indices, matrix.data)
+
+
+_NONE = np.zeros(0)             # no scale
+
+
+def matmul(A, X, out=None, add=False, scale=None):
+    """A diag(scale) X for a CSR matrix A (n, m) (a scipy matrix or a tuple, `csr`) and dense X
+    (m, k) or (m,): into ``out`` (n, k) or (n,) if given, added to it if ``add``. Each row is one
+    compiled sum in CSR order, from 0 (or from out's row if ``add``), of w * X[j] (w * (scale[j] *
+    X[j]) with a scale): the bits of scipy's A @ X (of A @ (scale[:, None] * X)); rows in parallel
+    chunks. X and out may be strided views (a column of a state array)."""
+    indptr, indices, data = csr(A)
+    n = len(indptr) - 1
+    if out is None:
+        if add:
+            raise ValueError("matmul: add=True needs out")
+        out = np.empty((n,) + X.shape[1:])
+    vector = X.ndim == 1
+    X2, out2 = (X[:, None], out[:, None]) if vector else (X, out)
+    kernel = _matmul(X2.shape[1] if X2.shape[1] <= SCRATCH_WIDTH else None, int(scale is not None))
+    s = _NONE if scale is None else np.asarray(scale, dtype=float)
+    rows(n, lambda lo, hi: kernel(indptr[lo:hi + 1], indices, data, s, X2, add, out2[lo:hi]))
+    return out
+
+
+SCRATCH_WIDTH = 81              # widths up to this get a kernel of their own (the loops unrolled)
+
+
+@kernel_factory
+def _matmul(nc, scaled):                # nc: a literal width (None: read at run time); scaled: 0 or 1
+    if nc is None:                      # wide X: the sums kept in out's row
+        def matmul(indptr, indices, data, scale, X, add, out):
+            for r in range(len(indptr) - 1):
+                if not add:
+                    out[r, :] = 0.0
+                for k in range(indptr[r], indptr[r + 1]):
+                    j, w = indices[k], data[k]
+                    s = scale[j] if scaled else 1.0
+                    for c in range(X.shape[1]):
+                        out[r, c] += w * (s * X[j, c]) if scaled else w * X[j, c]
+        return matmul
+
+    def matmul(indptr, indices, data, scale, X, add, out):
+        u = scratch((nc,))                  # the row's sums, in registers
+        for r in range(len(indptr) - 1):
+            for c in range(nc):
+                u[c] = out[r, c] if add else 0.0
+            for k in range(indptr[r], indptr[r + 1]):
+                j, w = indices[k], data[k]
+                if scaled:
+                    s = scale[j]
+                    for c in range(nc):
+                        u[c] += w * (s * X[j, c])
+                else:
+                    for c in range(nc):
+                        u[c] += w * X[j, c]
+            for c in range(nc):
+                out[r, c] = u[c]
+    return matmul
+
+
+class Transposed:
+    """A^T for CSR matrices A (n, n_cols) on one pattern (indptr, indices), applied without being
+    stored (`matmul_T`): the output rows (A's columns) split into chunks, each with the range of
+    A's rows that reach it. Cheap to make (one pass over the pattern, in parallel): for a pattern
+    that changes every step (MPM's shape functions). Always right; fast where the rows reaching a
+    chunk are a narrow range (particles numbered cell by cell, as they are: at 256^2 the two
+    chunks' ranges overlap by ~1 % of the particles)."""
+
+    def __init__(self, indptr, indices, n_cols):
+        self.indptr, self.indices, self.n_cols = indptr, indices, n_cols
+        self.chunks = chunks(n_cols)
+        starts = np.array([lo for lo, _ in self.chunks] + [n_cols], np.int64)
+        n = len(indptr) - 1
+        parts = chunks(n)
+        first = np.full((len(parts), len(self.chunks)), n, np.int64)     # per chunk of A's rows
+        last = np.zeros((len(parts), len(self.chunks)), np.int64)
+        index = {lo: k for k, (lo, _) in enumerate(parts)}
+        rows(n, lambda lo, hi: _row_ranges(indptr[lo:hi + 1], indices, lo, starts, first[index[lo]], last[index[lo]]))
+        self.first, self.last = first.min(axis=0), last.max(axis=0)
+
+
+def matmul_T(A, data, X, out=None, add=False, scale=None):
+    """A^T diag(scale) X for the `Transposed` pattern A and the data of one matrix on it (nnz,),
+    X (n, k) or (n,): into ``out`` (n_cols, k) if given, added to it if ``add``. Each chunk of
+    output rows runs over A's rows that reach it, in order, adding w * X[r] (w * (scale[r] *
+    X[r])) into its own rows only: every output row is the sum, from 0 (or from out's row), of
+    its terms in the order of A's rows, as scipy's A.T @ X sums them (the same bits), for any
+    thread count; no transpose is stored."""
+    if out is None:
+        if add:
+            raise ValueError("matmul_T: add=True needs out")
+        out = np.empty((A.n_cols,) + X.shape[1:])
+    vector = X.ndim == 1
+    X2, out2 = (X[:, None], out[:, None]) if vector else (X, out)
+    kernel = _scatter(X2.shape[1] if X2.shape[1] <= SCRATCH_WIDTH else None, int(scale is not None))
+    s = _NONE if scale is None else np.asarray(scale, dtype=float)
+    if len(A.chunks) != len(chunks(A.n_cols)):
+        raise ValueError("matmul_T: the thread count changed since the pattern was made")
+    k_of = {lo: k for k, (lo, _) in enumerate(A.chunks)}
+    rows(A.n_cols, lambda lo, hi: kernel(A.indptr, A.indices, data, s, X2, A.first[k_of[lo]], A.last[k_of[lo]],
+                                         lo, hi, add, out2))
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _row_ranges(indptr, indices, lo, starts, first, last):
+    """For rows lo + r of A: the first and last + 1 row reaching each column chunk (kept in this
+    thread's own arrays while it runs: the chunks' outputs share a cache line)."""
+    f, l = first.copy(), last.copy()
+    for r in range(len(indptr) - 1):
+        for k in range(indptr[r], indptr[r + 1]):
+            j, c = indices[k], 0
+            while j >= starts[c + 1]:
+                c += 1
+            f[c] = min(f[c], lo + r)
+            l[c] = max(l[c], lo + r + 1)
+    first[:] = f
+    last[:] = l
+
+
+@kernel_factory
+def _scatter(nc, scaled):               # nc: a literal width (None: read at run time); scaled: 0 or 1
+    def scatter(indptr, indices, data, scale, X, first, last, lo, hi, add, out):
+        width = X.shape[1] if nc is None else nc
+        if not add:
+            for j in range(lo, hi):
+                for c in range(width):
+                    out[j, c] = 0.0
+        for r in range(first, last):
+            s = scale[r] if scaled else 1.0
+            for k in range(indptr[r], indptr[r + 1]):
+                j = indices[k]
+                if j >= lo and j < hi:
+                    w = data[k]
+                    for c in range(width):
+                        out[j, c] += w * (s * X[r, c]) if scaled else w * X[r, c]
+    return scatter

@@ -5,6 +5,7 @@ weights [R18 eq 14-18]; the same forms with Gauss points give DGFEM. Everything 
 per grid (total Lagrangian: particles never change cell).
 """
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -236,7 +237,12 @@ class ParticleMap:
         return cls(S, P2G, rho, active)
 
     def project(self, values):
-        return self.P2G @ values
+        return parallel.matmul(self.P2G, values)
+
+    @cached_property
+    def S_T(self):
+        """S^T as CSR (`parallel.matmul`: S^T X with the bits of scipy's S.T @ X)."""
+        return self.S.T.tocsr()
 
     def project_state(self, U, Q, d):
         """Nodal (U, Q) from particle (U, Q) (n, d*d + d): U and the stress by `project`, the
@@ -248,11 +254,8 @@ class ParticleMap:
         return U_n, Q_n
 
     def interpolate(self, nodal):
-        """S nodal for nodal values (n_dofs, nc): one compiled pass, each row summed in CSR order
-        as scipy's product does."""
-        out = np.empty((self.S.shape[0], nodal.shape[1]))
-        gather_rows((self.S.indptr, self.S.indices, self.S.data), nodal, out)
-        return out
+        """S nodal for nodal values (n_dofs, nc) (`parallel.matmul`)."""
+        return parallel.matmul(self.S, nodal)
 
 
 @kernel_factory
@@ -279,28 +282,3 @@ def _project_state(d):                  # literal widths: the loops unrolled
             for c in range(dd, nc):
                 Q_n[r, c] = u[c] / rho[r]
     return project_state
-
-
-def gather_rows(matrix, values, out):
-    """out = A values for a CSR triple A = (indptr, indices, data) and values (n, nc): each row's
-    products summed in CSR order (as scipy's product does), rows in parallel chunks."""
-    indptr, indices, data = matrix
-    kernel = _interpolate(values.shape[1])
-    parallel.rows(len(out), lambda lo, hi: kernel(indptr[lo:hi + 1], indices, data, values, out[lo:hi]))
-
-
-@kernel_factory
-def _interpolate(nc):                   # a literal width: the loops unrolled
-    def interpolate(indptr, indices, data, nodal, out):
-        u = scratch((nc,))                  # the row's sums, in registers
-        for r in range(len(indptr) - 1):
-            for c in range(nc):
-                u[c] = 0.0
-            for k in range(indptr[r], indptr[r + 1]):
-                n, w = indices[k], data[k]
-                for c in range(nc):
-                    u[c] += w * nodal[n, c]
-            for c in range(nc):
-                out[r, c] = u[c]
-    return interpolate
-

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from . import system
+from . import parallel, system
 from .bcs import FREE
 from .errors import InputError, InstabilityError
 from .faces import boundary_faces
@@ -64,7 +64,7 @@ class FaceStates:
     rho_R: np.ndarray = None
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _advance_positions(x, v_old, v_new, half_dt, out):
     for p in range(len(x)):
         for k in range(x.shape[1]):
@@ -74,8 +74,8 @@ def _advance_positions(x, v_old, v_new, half_dt, out):
 def advance_positions(state, v_new, dt, d):
     """x + dt (v_old + v_new) / 2: current positions of points that move with the material (one
     compiled pass: the velocities are strided views of Q)."""
-    out = np.empty_like(state.x)
-    _advance_positions(state.x, state.Q[:, d * d:], v_new, 0.5 * dt, out)
+    out, x, v_old = np.empty_like(state.x), state.x, state.Q[:, d * d:]
+    parallel.rows(len(x), lambda lo, hi: _advance_positions(x[lo:hi], v_old[lo:hi], v_new[lo:hi], 0.5 * dt, out[lo:hi]))
     return out
 
 
@@ -218,13 +218,13 @@ class GodunovScheme:
         boundary, power = self.boundary_flux(grid_state, time)
         interior = self.interface_flux(grid_state)
         corr_int, corr_bnd = self.transverse_flux(interior, boundary, dt)
-        R = np.zeros((self.n_dofs, grid_state.U.shape[1]))     # the unknowns may live on particles
-        flux = interior.flux + corr_int
-        R -= self.interior.integrate(flux, "L")
-        R += self.interior.integrate(flux, "R")
-        R -= self.boundary.integrate(boundary.flux + corr_bnd, "L")
+        no_corrections = np.isscalar(corr_int) and corr_int == 0 and np.isscalar(corr_bnd) and corr_bnd == 0
+        flux, flux_bnd = (interior.flux, boundary.flux) if no_corrections else (interior.flux + corr_int,
+                                                                                boundary.flux + corr_bnd)
+        R = self.interior.integrate_jump(flux)           # side R minus side L, one pass
+        self.boundary.integrate(flux_bnd, "L", R, sign=-1.0)
         if getattr(self, "ctu", None) is not None:                   # work of the corrected boundary flux
-            F, p = system.split(boundary.flux + corr_bnd, self.d)
+            F, p = system.split(flux_bnd, self.d)
             v = -np.einsum("fia,fa->fi", F, self.boundary.normal)
             power = float(np.sum(self.boundary.measure * np.einsum("fi,fi->f", -p, v)))
         return R, power

@@ -24,9 +24,23 @@ def split(W, d):
 
 
 def join(T, v):
-    """Inverse of ``split``."""
+    """Inverse of ``split``: one compiled pass (in parallel chunks)."""
     n, d = v.shape
-    return np.concatenate([T.reshape(n, d * d), v], axis=1)
+    out, T = np.empty((n, d * d + d)), T.reshape(n, d, d)
+    kernel = _join(d)
+    parallel.rows(n, lambda lo, hi: kernel(T[lo:hi], v[lo:hi], out[lo:hi]))
+    return out
+
+
+@kernel_factory
+def _join(d):                           # a literal d: the loops unrolled
+    def join(T, v, out):
+        for k in range(len(v)):
+            for i in range(d):
+                for a in range(d):
+                    out[k, i * d + a] = T[k, i, a]
+                out[k, d * d + i] = v[k, i]
+    return join
 
 
 @kernel_factory
@@ -60,8 +74,9 @@ def embed(F):
     """(n, d, d) -> (n, 3, 3): plane strain / uniaxial strain embedding, identity elsewhere
     (`equations.embed`; F may be a strided view of a state array)."""
     n, d = len(F), F.shape[1]
-    F3 = np.empty((n, 3, 3))
-    _embed(d)(np.reshape(F, (n, d * d)), F3)
+    F3, F = np.empty((n, 3, 3)), np.reshape(F, (n, d * d))
+    kernel = _embed(d)
+    parallel.rows(n, lambda lo, hi: kernel(F[lo:hi], F3[lo:hi]))
     return F3
 
 

@@ -3,6 +3,7 @@
 so that these small grids are split into several chunks, as a 256^2 grid is."""
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from skdgmpm import parallel
 from skdgmpm.build import build
@@ -18,7 +19,19 @@ CASES = {
                                                     "grid.cells=[12, 9]", "particles.per_cell=[0.25, 0.75]"]),
     "rk-dgfem-1": ("plate_impact_neohookean_2d", ['method.name="rk-dgfem"', 'method.integrator="rk2"',
                                                   "method.cfl=0.4", "grid.cells=[12, 9]"]),
+    "ader-dgmpm-2-flip": ("convergence_square", ['method.name="ader-dgmpm"', "method.order=2", "grid.cells=[5, 5]",
+                                                 "particles.per_cell=[0.25, 0.5, 0.75]", 'method.backmap="flip"']),
+    "ader-dgfem-2": ("plate_impact_neohookean_2d", ['method.name="ader-dgfem"', "method.order=2", "method.cfl=0.4",
+                                                    "grid.cells=[8, 6]"]),
+    "rk-dgfem-2-j2": ("plate_impact_j2_2d", ['method.name="rk-dgfem"', "method.order=2", 'method.integrator="rk4"',
+                                             "method.cfl=0.4", "grid.cells=[8, 6]"]),
     "mpm-cd-cpgimp": ("mms_axis_aligned_2d", ["grid.cells=[12, 12]", 'method.name="mpm"', 'method.update="cd"']),
+    "mpm-usl-hat": ("plate_impact_neohookean_2d", ["grid.cells=[12, 9]", 'method.name="mpm"', 'method.update="usl"',
+                                                   'method.shape="hat"', "method.cfl=0.4"]),
+    "mpm-usf-cpgimp": ("plate_impact_neohookean_2d", ["grid.cells=[12, 9]", 'method.name="mpm"', 'method.update="usf"',
+                                                      "method.cfl=0.4"]),
+    "mpm-uvf-ugimp": ("plate_impact_neohookean_2d", ["grid.cells=[12, 9]", 'method.name="mpm"', 'method.update="uvf"',
+                                                     'method.shape="ugimp"', "method.cfl=0.4"]),
     "dgmpm-1d": ("bar_elastic_1d", ["grid.cells=200", "particles.per_cell=2", "method.cfl=0.5"]),
 }
 
@@ -30,7 +43,7 @@ def _run(name, threads):
     state = disc.initial
     for _ in range(STEPS):
         state = disc.stepper.step(state)
-    return state
+    return state, disc.stepper.external_work
 
 
 @pytest.mark.parametrize("name", list(CASES))
@@ -40,10 +53,10 @@ def test_bits_do_not_depend_on_the_thread_count(name, monkeypatch):
         runs = [_run(name, n) for n in (1, 2, 3)]
     finally:
         parallel.set_threads(None)
-    one = runs[0]
+    one, work = runs[0]
     assert one.step == STEPS and np.all(np.isfinite(one.U))
-    for other in runs[1:]:
-        assert other.t == one.t
+    for other, other_work in runs[1:]:
+        assert other.t == one.t and other_work == work
         for a, b in ((one.U, other.U), (one.Q, other.Q), (one.x, other.x)):
             assert np.array_equal(a, b)
         if one.dofs is not None:
@@ -95,5 +108,44 @@ def test_run_threads_key_and_option(tmp_path):
         assert main(["run", "bar_elastic_1d", "--threads", "1", "--set", "grid.cells=20", "--set",
                      "run.t_end=2e-5", "--quiet", "--out", str(tmp_path / "y")]) == 0
         assert parallel.threads() == 1
+    finally:
+        parallel.set_threads(None)
+
+
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_products_give_scipys_bits(threads, monkeypatch):
+    """`parallel.matmul` is scipy's A @ X, on A.T.tocsr() scipy's A.T @ X, and `parallel.matmul_T`
+    scipy's A.T @ X, bit for bit: unsorted rows with duplicate columns, vectors, strided columns, a
+    scale, a width read at run time, and a sum continued from ``out``."""
+    monkeypatch.setattr(parallel, "MIN_ROWS", 16)
+    rng = np.random.default_rng(0)
+    n, m, per_row = 500, 300, 9
+    indptr, cols = np.arange(0, n * per_row + 1, per_row), rng.integers(0, m, n * per_row)
+    data = rng.standard_normal((3, n * per_row))
+    A = [sp.csr_matrix((data[k], cols, indptr), shape=(n, m)) for k in range(3)]
+    try:
+        parallel.set_threads(threads)
+        pattern = parallel.Transposed(indptr, cols, m)
+        for X in (rng.standard_normal(m), rng.standard_normal((m, 6)), rng.standard_normal((m, 2, 2))[:, :, 1],
+                  rng.standard_normal((m, 90))):
+            assert np.array_equal(parallel.matmul(A[0], X), A[0] @ X)
+        for k in range(3):
+            for Y in (rng.standard_normal(n), rng.standard_normal((n, 6)), rng.standard_normal((n, 2, 2))[:, :, 0],
+                      rng.standard_normal((n, 90))):
+                scale = rng.random(n)
+                scaled = scale[:, None] * Y if Y.ndim == 2 else scale * Y
+                assert np.array_equal(parallel.matmul(A[k].T.tocsr(), Y), A[k].T @ Y)
+                assert np.array_equal(parallel.matmul(A[k].T.tocsr(), Y, scale=scale), A[k].T @ scaled)
+                assert np.array_equal(parallel.matmul_T(pattern, data[k], Y), A[k].T @ Y)
+                assert np.array_equal(parallel.matmul_T(pattern, data[k], Y, scale=scale), A[k].T @ scaled)
+        out, Y = rng.standard_normal((m, 6)), rng.standard_normal((n, 6))
+        expected = out.copy()
+        for j in range(m):                  # the scatter into out it replaces, row by row
+            for p in range(n):
+                for q in range(indptr[p], indptr[p + 1]):
+                    if cols[q] == j:
+                        expected[j] += data[0, q] * Y[p]
+        assert np.array_equal(parallel.matmul(A[0].T.tocsr(), Y, out.copy(), add=True), expected)
+        assert np.array_equal(parallel.matmul_T(pattern, data[0], Y, out.copy(), add=True), expected)
     finally:
         parallel.set_threads(None)
