@@ -244,10 +244,13 @@ class ParticleMap:
         """S^T as CSR (`parallel.matmul`: S^T X with the bits of scipy's S.T @ X)."""
         return self.S.T.tocsr()
 
-    def project_state(self, U, Q, d):
+    def project_state(self, U, Q, d, out=None):
         """Nodal (U, Q) from particle (U, Q) (n, d*d + d): U and the stress by `project`, the
-        nodal velocity from the projected momentum (v = p / rho), in one compiled pass."""
-        U_n, Q_n = np.empty((self.P2G.shape[0], U.shape[1])), np.empty((self.P2G.shape[0], Q.shape[1]))
+        nodal velocity from the projected momentum (v = p / rho), in one compiled pass (into
+        ``out`` = (U_n, Q_n) if given)."""
+        if out is None:
+            out = np.empty((self.P2G.shape[0], U.shape[1])), np.empty((self.P2G.shape[0], Q.shape[1]))
+        U_n, Q_n = out
         A, kernel = self.P2G, _project_state(d)
         parallel.rows(len(U_n), lambda lo, hi: kernel(A.indptr[lo:hi + 1], A.indices, A.data, U, Q, self.rho[lo:hi],
                                                       U_n[lo:hi], Q_n[lo:hi]))
