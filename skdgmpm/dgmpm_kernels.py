@@ -205,13 +205,15 @@ def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, p
     transverse parts per unit Delta t of both sides' fluctuations into G (nf, 4, nc): side L's
     for its cell's two edges in G[:, 0:2], side R's in G[:, 2:4] (summed on the edges by a row
     gather, `parallel.matmul`: each face writes its own rows only). ``records`` = (rec,
-    state, normals, local face of each face in cell L, in cell R) (`cell_records`): a side whose
-    cell is recorded reads its record, another computes its trace's record. Returns the first face
-    whose acoustic tensor is not positive definite, or -1."""
+    state, normals, local face of each face in cell L, in cell R, recorded) (`cell_records`): a
+    side whose cell is recorded reads its record, another computes its trace's record; with
+    ``recorded`` (every cell is) the trace path is not compiled, and CTU writes the two
+    fluctuations into G (nf, 2, nc) instead, for `edge_corrections`. Returns the first face whose
+    acoustic tensor is not positive definite, or -1."""
     rec, state, normals, k_L, k_R, recorded = records
-    return _interior_pass(N.shape[1], normals.shape[1], bool(recorded))(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws,
-                                                        params, rec, state, normals, k_L, k_R, ctu, topo_L, topo_R,
-                                                        flux, G)
+    kernel = _interior_pass(N.shape[1], normals.shape[1], bool(recorded))
+    return kernel(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params, rec, state, normals, k_L, k_R,
+                  ctu, topo_L, topo_R, flux, G)
 
 
 @kernel_factory
