@@ -124,8 +124,7 @@ class DGMPM(GodunovScheme):
         m, f = self.grid.submesh, self.interior
         n_cells = m.nelements
         self.cell_dofs = np.argsort(self.dof_cell, kind="stable").astype(np.int32).reshape(n_cells, -1)
-        self.local_face = tuple(np.argmax(m.t2f[:, cells] == f.facets[None, :], axis=0).astype(np.int8)
-                                for cells in (f.cell_L, f.cell_R))
+        self.local_face = tuple(_local_face(m, cells, f.facets).astype(np.int8) for cells in (f.cell_L, f.cell_R))
         normal = np.zeros((m.nfacets, self.d))
         normal[f.facets], normal[self.boundary.facets] = f.normal, self.boundary.normal
         normals = normal[m.t2f.T]                                   # (n_cells, faces, d)
@@ -266,7 +265,7 @@ class DGMPM(GodunovScheme):
         pos_bnd[self.boundary.facets] = np.arange(len(self.boundary))
         faces = self.boundary if side == "boundary" else self.interior
         cells = {"L": self.interior.cell_L, "R": self.interior.cell_R, "boundary": self.boundary.cell_L}[side]
-        k = np.argmax(m.t2f[:, cells] == faces.facets[None, :], axis=0)
+        k = _local_face(m, cells, faces.facets)
         j = m.t2f[(k[None, :] + np.array([1, 3])[:, None]) % 4, cells[None, :]]     # (2, nf)
         j_int, j_bnd = pos_int[j], pos_bnd[j]
         sign = np.where(self.interior.cell_L[j_int] == cells, 1.0, -1.0)
@@ -410,3 +409,7 @@ class DGMPM(GodunovScheme):
         finally:
             self._kept = None       # the projected state and its terms: not held between steps
 
+
+def _local_face(mesh, cells, facets):
+    """The local index (0 .. faces per cell - 1) of each facet in its cell (both (nf,))."""
+    return np.argmax(mesh.t2f[:, cells] == facets[None, :], axis=0)

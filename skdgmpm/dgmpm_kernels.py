@@ -78,9 +78,33 @@ def _add_boundary_edges(edge_bnd, f, G_0, G_1, corr_bnd):
 
 
 # ---------------------------------------------------------------- side records
+# The layout of a side record, written once: q (nc), 1 / rho, the tangent C (d^4), then per face
+# direction of the cell (``slots``) its impedance Z = sqrt(rho A_n) and Z^-1 (d * d each).
+@njit(cache=True, inline="always")
+def _inv_rho_at(d):
+    return d * d + d
+
+
+@njit(cache=True, inline="always")
+def _tangent_at(d):
+    return d * d + d + 1
+
+
+@njit(cache=True, inline="always")
+def _impedance_at(d, slot):
+    """Where Z along the face direction ``slot`` starts (Z^-1 follows, d * d later)."""
+    return d * d + d + 1 + d ** 4 + 2 * d * d * slot
+
+
+@njit(cache=True, inline="always")
+def _edge_slot(k, e, slots):
+    """The face direction of the edge e (0, 1) of a quad cell adjacent to its local face k: the
+    local faces k + 1 and k + 3 (opposite faces k, k + 2)."""
+    return ((k + 1 + 2 * e) % 4) % slots
+
+
 def record_width(d, slots):
-    """Entries of one side record: q (nc), 1 / rho, the tangent C (d^4), then per face direction
-    of the cell (``slots``) its impedance Z = sqrt(rho A_n) and Z^-1 (d * d each)."""
+    """Entries of one side record (see `_impedance_at`)."""
     return d * d + d + 1 + d ** 4 + 2 * d * d * slots
 
 
@@ -92,8 +116,8 @@ def _fill_record(q, rho, C, normals, r, d, slots):
     Z, Zi = scratch((d, d)), scratch((d, d))
     for k in range(nc):
         r[k] = q[k]
-    r[nc] = 1.0 / rho
-    o = nc + 1
+    r[_inv_rho_at(d)] = 1.0 / rho
+    o = _tangent_at(d)
     for i in range(d):
         for a in range(d):
             for j in range(d):
@@ -106,11 +130,11 @@ def _fill_record(q, rho, C, normals, r, d, slots):
         for i in range(d):
             n[i] = normals[s, i]
         ok = impedance(C, n, rho, Z, Zi, d) and ok
+        o = _impedance_at(d, s)
         for i in range(d):
             for j in range(d):
                 r[o + i * d + j] = Z[i, j]
                 r[o + dd + i * d + j] = Zi[i, j]
-        o += 2 * dd
     return ok
 
 
@@ -126,7 +150,7 @@ def _copy_record(rec, state, c, r):
 @njit(cache=True, inline="always")
 def _record_tangent(r, C, d):
     """C (d, d, d, d) of a side record."""
-    o = d * d + d + 1
+    o = _tangent_at(d)
     for i in range(d):
         for a in range(d):
             for j in range(d):
@@ -138,7 +162,7 @@ def _record_tangent(r, C, d):
 @njit(cache=True, inline="always")
 def _record_impedance(r, slot, Z, d):
     """Z (d, d) of a side record along the face direction ``slot``."""
-    o = d * d + d + 1 + d ** 4 + 2 * d * d * slot
+    o = _impedance_at(d, slot)
     for i in range(d):
         for j in range(d):
             Z[i, j] = r[o + i * d + j]
@@ -148,7 +172,7 @@ def _record_impedance(r, slot, Z, d):
 def _record_pair(r, slot):
     """(Z, Z^-1) of a 2D side record along the face direction ``slot``, as the 8-tuple
     `equations.ctu_parts` takes."""
-    o = 4 + 2 + 1 + 16 + 8 * slot
+    o = _impedance_at(2, slot)
     return (r[o], r[o + 1], r[o + 2], r[o + 3], r[o + 4], r[o + 5], r[o + 6], r[o + 7])
 
 
@@ -287,9 +311,9 @@ def _split_into(w, C, r, k, topo, f, G, part, slots):
     side of face f, local face k of the side's cell with record r: its parts for the cell's two
     edges adjacent to the face (local faces k + 1, k + 3) into G[f, part] and G[f, part + 1]."""
     h, normals = topo
-    G_0, G_1 = ctu_parts(w, C, r[6], -1.0 / (2.0 * h[f]), normals[f, 0, 0], normals[f, 0, 1],
-                         normals[f, 1, 0], normals[f, 1, 1], _record_pair(r, ((k + 1) % 4) % slots),
-                         _record_pair(r, ((k + 3) % 4) % slots))
+    G_0, G_1 = ctu_parts(w, C, r[_inv_rho_at(2)], -1.0 / (2.0 * h[f]), normals[f, 0, 0], normals[f, 0, 1],
+                         normals[f, 1, 0], normals[f, 1, 1], _record_pair(r, _edge_slot(k, 0, slots)),
+                         _record_pair(r, _edge_slot(k, 1, slots)))
     for c in range(6):
         G[f, part, c] = G_0[c]
         G[f, part + 1, c] = G_1[c]
@@ -336,15 +360,15 @@ def _edge_corrections(slots):
                         cell, kf, h, a0, a1 = cell_R[f], k_R[f], h_R[f], n_R[f, e, 0], n_R[f, e, 1]
                     for i in range(6):
                         w[i] = W[f, side, i]
-                    o = 7
+                    o = _tangent_at(2)
                     for i in range(2):
                         for a in range(2):
                             for jj in range(2):
                                 for b in range(2):
                                     C[i, a, jj, b] = rec[cell, o]
                                     o += 1
-                    z = 23 + 8 * (((kf + 1 + 2 * e) % 4) % slots)
-                    g = ctu_part(w, C, rec[cell, 6], -1.0 / (2.0 * h), a0, a1,
+                    z = _impedance_at(2, _edge_slot(kf, e, slots))
+                    g = ctu_part(w, C, rec[cell, _inv_rho_at(2)], -1.0 / (2.0 * h), a0, a1,
                                  (rec[cell, z], rec[cell, z + 1], rec[cell, z + 2], rec[cell, z + 3], rec[cell, z + 4],
                                   rec[cell, z + 5], rec[cell, z + 6], rec[cell, z + 7]))
                     if interior:
