@@ -30,7 +30,7 @@ import scipy.sparse as sp
 from skdgmpm.materials.points import law_table
 
 from . import parallel, system
-from .dgmpm_kernels import (boundary_edge_corrections, boundary_pass, boundary_sides, cell_records, edge_corrections,
+from .dgmpm_kernels import (boundary_edge_corrections, boundary_pass, boundary_sides, cell_corrections, cell_records,
                             euler_update, integrate_faces, interior_pass, record_width)
 from .errors import InputError
 from .faces import interior_faces
@@ -134,10 +134,11 @@ class DGMPM(GodunovScheme):
         self.cell_normals = np.ascontiguousarray(normals[:, :half] if parallel_pairs else normals)
 
     def _setup_transverse(self):
-        """CTU set-up: the boundary faces' `side_topology`; for the interior faces' sides, only
-        what the face pass reads, (h, normals (nf, 2, 2)) (face-major: a chunk of faces is a
-        slice), and the edges' gathers of the parts (`_edge_gathers`): each face writes its own
-        parts, each edge sums those it receives, the same for any thread count. DCU: empty."""
+        """CTU set-up: the boundary faces' `side_topology`; what the cells read to send their
+        parts (`_cell_sources`); for a step where a cell is not recorded, the interior faces'
+        sides (h, normals (nf, 2, 2)) (face-major: a chunk of faces is a slice) and the edges'
+        gathers of the parts (`_edge_gathers`): each face writes its own parts, each edge sums
+        those it receives, the same for any thread count. DCU: empty."""
         empty = (np.zeros(0), np.zeros((2, 0, 2)), np.zeros((2, 0), np.int64), np.zeros((2, 0), np.int64),
                  np.zeros((2, 0)))
         self.ctu = None
@@ -150,6 +151,7 @@ class DGMPM(GodunovScheme):
         for side, (h, n, *_) in sides.items():
             self.split_topology[side] = (h, np.ascontiguousarray(n.transpose(1, 0, 2)))
         self.to_interior, self.to_boundary = self._edge_gathers(sides)
+        self.cell_sources = self._cell_sources(sides)
         frame = np.zeros((len(self.boundary), 2, 2))
         free_v = np.zeros((len(self.boundary), 2), bool)
         free_t = np.zeros((len(self.boundary), 2), bool)
@@ -157,6 +159,27 @@ class DGMPM(GodunovScheme):
             frame[sel], imp_v, imp_t = bc.constraints(self.boundary.normal[sel])
             free_v[sel], free_t[sel] = ~imp_v, ~imp_t
         self.ctu = self._boundary_filter(frame, free_v, free_t)
+
+    def _cell_sources(self, sides):
+        """What `cell_corrections` reads per cell and local face k (n_cells, 4): the row of the
+        face's fluctuation entering the cell, 2 f + side (int32; -1 - b for boundary face b), its
+        scale -1 / (2 h) (0 at boundary faces), and the sign that makes the cell's face direction
+        ``cell_normals[c, k % slots]`` the outward normal of face k (int8, exact)."""
+        m, f, b = self.grid.submesh, self.interior, self.boundary
+        n_cells, slots = m.nelements, self.cell_normals.shape[1]
+        sources = np.empty((n_cells, 4), np.int64)
+        scale = np.zeros((n_cells, 4))
+        outward = np.empty((n_cells, 4, 2))
+        k_b = _local_face(m, b.cell_L, b.facets)
+        sources[b.cell_L, k_b], outward[b.cell_L, k_b] = -1 - np.arange(len(b)), b.normal
+        for s, (cells, k, sign) in enumerate(((f.cell_L, self.local_face[0], 1.0), (f.cell_R, self.local_face[1], -1.0))):
+            sources[cells, k] = 2 * np.arange(len(f)) + s
+            scale[cells, k] = -1.0 / (2.0 * sides["LR"[s]][0])
+            outward[cells, k] = sign * f.normal
+        direction = self.cell_normals[:, np.arange(4) % slots]
+        signs = np.where(np.all(outward == direction, axis=2), 1, -1).astype(np.int8)
+        assert np.all(signs[..., None] * direction == outward), "a cell's opposite faces are not parallel"
+        return sources.astype(np.int32), scale, signs
 
     # ---------------------------------------------------------------- stages
     @stage
@@ -175,12 +198,13 @@ class DGMPM(GodunovScheme):
     @stage
     def interface_flux(self, grid_state):
         """(e) Godunov fluxes at interior faces from the linearised Riemann solver with (CTU) the
-        transverse corrections of both sides' fluctuations, in one compiled pass. Returns the
-        fluxes (nf, nc) and the corrections per unit Delta t of the interior and boundary faces'
-        fluxes, (nf, nc) and (nb, nc)."""
+        transverse corrections of both sides' fluctuations. Returns the fluxes (nf, nc) and the
+        corrections per unit Delta t of the interior faces' fluxes as the Euler pass reads them,
+        (nf, sides, nc) (`dgmpm_kernels.face_corrections`: the parts both cells send, the
+        gathered correction, or none for DCU), and of the boundary faces' fluxes (nb, nc)."""
         f, nc = self.interior, grid_state.U.shape[1]
         ctu = self.ctu is not None
-        flux, corr, corr_bnd = np.empty((len(f), nc)), np.zeros((len(f), nc)), np.zeros((len(self.boundary), nc))
+        flux, corr_bnd = np.empty((len(f), nc)), np.zeros((len(self.boundary), nc))
         T_L, T_R, rho, laws = self.traces["L"], self.traces["R"], self.map.rho, self.laws
         (h_L, n_L), (h_R, n_R) = self.split_topology["L"], self.split_topology["R"]
         csr = parallel.csr_rows
@@ -193,9 +217,9 @@ class DGMPM(GodunovScheme):
             dofs[lo:hi], grid_state.U, grid_state.Q, rho, self.cell_material[lo:hi], *laws, normals[lo:hi], rec[lo:hi],
             state[lo:hi]))
         recorded = bool(np.all(state != 0))         # one particle per cell: the faces read no trace
-        # CTU: with every cell recorded, the faces keep their fluctuations (nf, 2, nc) and each edge
-        # splits those it receives (`edge_corrections`); otherwise the faces split them and keep
-        # the parts (nf, 4, nc), which each edge gathers
+        # CTU: with every cell recorded, the faces keep their fluctuations (nf, 2, nc) and each cell
+        # sends the parts of those entering it (`cell_corrections`), in place; otherwise the faces
+        # split them and keep the parts (nf, 4, nc), which each edge gathers
         G = self._buffer("fluctuations", (len(f) if ctu else 0, 2 if recorded else 4, nc))
 
         def faces(lo, hi):
@@ -208,14 +232,18 @@ class DGMPM(GodunovScheme):
         if bad >= 0:
             _not_hyperbolic(bad)
         if ctu and recorded:
-            sides = (f.cell_L, f.cell_R, k_L, k_R, self.split_topology["L"], self.split_topology["R"])
-            parallel.rows(len(f), lambda lo, hi: edge_corrections(
-                self.to_interior, self.to_boundary, G, rec, normals.shape[1], sides, corr, corr_bnd, lo, hi))
-        elif ctu:
+            sources, scale, signs = self.cell_sources
+            W = G.reshape(-1, nc)
+            parallel.rows(n_cells, lambda lo, hi: cell_corrections(
+                sources[lo:hi], scale[lo:hi], signs[lo:hi], rec[lo:hi], normals[lo:hi], W, corr_bnd))
+            return flux, G, corr_bnd
+        if ctu:
+            corr = np.empty((len(f), 1, nc))
             parts = G.reshape(-1, nc)               # each edge: sum_k sign_k G[part_k], in face order
-            parallel.matmul(self.to_interior, parts, corr)
+            parallel.matmul(self.to_interior, parts, corr[:, 0])
             boundary_edge_corrections(self.to_boundary, parts, corr_bnd)
-        return flux, corr, corr_bnd
+            return flux, corr, corr_bnd
+        return flux, np.empty((len(f), 0, nc)), corr_bnd
 
     @stage
     def boundary_flux(self, grid_state, time, dt, weight, R, corr_bnd):

@@ -14,7 +14,8 @@ For every face the pass then solves the linearised Riemann problem (`skdgmpm.equ
 and, for CTU, splits each fluctuation on the characteristic basis of the two edges of
 the cell it enters as soon as it is known, writing the two parts beside the face's flux; each
 edge then gathers the parts it receives (`DGMPM.interface_flux`: a CSR row gather, signs as
-weights), in face order. Every pass writes
+weights), in face order. With every cell recorded, the faces keep their fluctuations instead and
+each cell splits the sums of those entering it (`cell_corrections`). Every pass writes
 its own rows only, so that it runs in chunks on several threads with the same bits
 (`skdgmpm.parallel`). The corrections are proportional to Delta t (G = -dt / (2 h) B+ A dU): the
 interior pass stores them per unit Delta t, so that a repeated attempt of the CFL guard reuses
@@ -27,11 +28,12 @@ Face-set arrays as in `skdgmpm.faces` ((nf, d) normals, (nf,) measures); a trace
 by `DGMPM._setup_transverse` (empty arrays for DCU); the interior pass takes (h, normals (nf, 2, 2))
 of each side, face-major so that a chunk of faces is a contiguous slice.
 """
+import numpy as np
 from numba import njit
 
 from skdgmpm.materials.points import tangent_call, tangent_point
 
-from .equations import add_normal_flux, ctu_part, ctu_parts, ctu_split, embed, fluctuations, godunov, impedance, traction
+from .equations import add_normal_flux, ctu_parts, ctu_split, embed, fluctuations, godunov, impedance, traction
 from .faces import gather_row
 from .kernel_cache import kernel_factory, scratch
 from .system import DIMENSION, volume_row
@@ -232,7 +234,7 @@ def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, p
     state, normals, local face of each face in cell L, in cell R, recorded) (`cell_records`): a
     side whose cell is recorded reads its record, another computes its trace's record; with
     ``recorded`` (every cell is) the trace path is not compiled, and CTU writes the two
-    fluctuations into G (nf, 2, nc) instead, for `edge_corrections`. Returns the first face whose
+    fluctuations into G (nf, 2, nc) instead, for `cell_corrections`. Returns the first face whose
     acoustic tensor is not positive definite, or -1."""
     rec, state, normals, k_L, k_R, recorded = records
     kernel = _interior_pass(N.shape[1], normals.shape[1], bool(recorded))
@@ -291,7 +293,7 @@ def _interior_pass(d, slots, recorded):     # literals: the loops unrolled, the 
             add_normal_flux(t_s, v_s, n, 1.0, o, d)
             for k in range(nc):
                 flux[f, k] = o[k]
-            if d == 2 and ctu and recorded:     # the fluctuations kept: each edge splits those it receives
+            if d == 2 and ctu and recorded:     # the fluctuations kept: each cell splits those entering it
                 fluctuations(s_L, s_R, n, t_L, t_R, o, w_L, w_R, d)
                 for k in range(nc):
                     G[f, 0, k], G[f, 1, k] = w_L[k], w_R[k]
@@ -319,74 +321,64 @@ def _split_into(w, C, r, k, topo, f, G, part, slots):
         G[f, part + 1, c] = G_1[c]
 
 
-# ---------------------------------------------------------------- CTU parts gathered by the edges
-def edge_corrections(to_interior, to_boundary, W, rec, slots, faces, corr, corr_bnd, lo, hi):
-    """The CTU corrections per unit Delta t that interior edges lo:hi receive, into corr[lo:hi]
-    (sum_k sign_k part_k in the order of their CSR rows, as the gather of the parts written at the
-    faces sums them: the same bits), from the fluctuations W (nf, 2, 6) entering recorded cells;
-    with lo = 0, also the boundary edges' (`boundary_edge_corrections`). A part p = 4 f + 2 side
-    + e (`DGMPM._edge_gathers`) is `equations.ctu_part` of W[f, side] for the cell's edge e
-    adjacent to face f (local face k + 1 + 2 e) with the cell's record (its tangent, 1 / rho, the
-    impedance along that edge), per unit Delta t: the number `interior_pass` writes as that part
-    when it splits at the face. faces = (cell_L, cell_R, local face in L, in R, (h, normals) of
-    side L, of side R)."""
-    cell_L, cell_R, k_L, k_R, (h_L, n_L), (h_R, n_R) = faces
-    _edge_corrections(slots)(to_interior, to_boundary, W, rec, cell_L, cell_R, k_L, k_R, h_L, n_L, h_R, n_R, corr,
-                             corr_bnd, lo, hi)
+# ---------------------------------------------------------------- CTU parts summed by the cells
+def cell_corrections(sources, scale, signs, rec, normals, W, corr_bnd):
+    """The CTU corrections per unit Delta t that the cells send through their faces, every cell
+    recorded (2D quads). A cell's edge (local face k) receives the parts of the fluctuations
+    entering the cell through its two adjacent faces k + 1, k + 3, each scaled by -1 / (2 h) (h
+    the cell's size across that face); the split B+ is linear, so their scaled sum is split once
+    (`equations.ctu_parts`, the cell's record: tangent, 1 / rho, impedances), and edges k and
+    k + 2 share it: two sums and four splits per cell instead of two splits per fluctuation.
+    W (2 nf, nc): row 2 f + side the fluctuation entering that side of interior face f (the face
+    pass's), overwritten by the part the side's cell sends through face f (the correction of face
+    f is then W[2 f] - W[2 f + 1]: `face_corrections`); a boundary face b gets its part less the
+    opposite face's into corr_bnd[b] (its ghost cell, a copy of the cell, sends that back). Each
+    cell reads and writes only its own faces' rows. sources (n_cells, 4) int32: 2 f + side of
+    each local face, or -1 - b for boundary face b; scale (n_cells, 4): -1 / (2 h) (0 at boundary
+    faces, whose fluctuations the boundary pass splits); signs (n_cells, 4): the outward normal of
+    local face k is signs[c, k] normals[c, k % slots]."""
+    _cell_corrections(normals.shape[1])(sources, scale, signs, rec, normals, W, corr_bnd)
 
 
 @kernel_factory
-def _edge_corrections(slots):
-    def edge_corrections(to_interior, to_boundary, W, rec, cell_L, cell_R, k_L, k_R, h_L, n_L, h_R, n_R, corr,
-                         corr_bnd, lo, hi):
-        # written out in the loop, not in an inlined helper: arrays handed to a helper are
-        # reference counted at each call where a branch follows
-        w, C, u, g_p = scratch((6,)), scratch((2, 2, 2, 2)), scratch((6,)), scratch((6,))
-        indptr, parts, sign = to_interior
-        indptr_b, parts_b, other_b = to_boundary
-        n_b = len(indptr_b) - 1 if lo == 0 else 0
-        for j in range(lo, hi + n_b):
-            interior = j < hi
-            for c in range(6):
-                u[c] = 0.0 if interior else corr_bnd[j - hi, c]
-            start, stop = (indptr[j], indptr[j + 1]) if interior else (indptr_b[j - hi], indptr_b[j - hi + 1])
-            for k in range(start, stop):
-                for q in range(1 if interior else 2):   # a boundary edge: its part less the opposite edge's
-                    p = parts[k] if interior else (parts_b[k] if q == 0 else other_b[k])
-                    f, side, e = p // 4, (p // 2) % 2, p % 2
-                    if side == 0:
-                        cell, kf, h, a0, a1 = cell_L[f], k_L[f], h_L[f], n_L[f, e, 0], n_L[f, e, 1]
-                    else:
-                        cell, kf, h, a0, a1 = cell_R[f], k_R[f], h_R[f], n_R[f, e, 0], n_R[f, e, 1]
+def _cell_corrections(slots):
+    width = record_width(2, slots)
+
+    def cell_corrections(sources, scale, signs, rec, normals, W, corr_bnd):
+        r, C, w, n, S = scratch((width,)), scratch((2, 2, 2, 2)), scratch((4, 6)), scratch((4, 2)), scratch((6,))
+        for c in range(len(sources)):
+            for k in range(width):
+                r[k] = rec[c, k]
+            for k in range(4):                  # the fluctuations entering through the four faces, scaled
+                s = sources[c, k]
+                for i in range(6):
+                    w[k, i] = scale[c, k] * W[s, i] if s >= 0 else 0.0
+                for i in range(2):
+                    n[k, i] = signs[c, k] * normals[c, k % slots, i]
+            _record_tangent(r, C, 2)
+            for e in range(2):                  # edges e, e + 2 <- faces e + 1, e + 3
+                for i in range(6):
+                    S[i] = w[e + 1, i] + w[(e + 3) % 4, i]
+                G_a, G_b = ctu_parts(S, C, r[_inv_rho_at(2)], 1.0, n[e, 0], n[e, 1], n[e + 2, 0], n[e + 2, 1],
+                                     _record_pair(r, e % slots), _record_pair(r, (e + 2) % slots))
+                for q in range(2):
+                    s = sources[c, e + 2 * q]
                     for i in range(6):
-                        w[i] = W[f, side, i]
-                    o = _tangent_at(2)
-                    for i in range(2):
-                        for a in range(2):
-                            for jj in range(2):
-                                for b in range(2):
-                                    C[i, a, jj, b] = rec[cell, o]
-                                    o += 1
-                    z = _impedance_at(2, _edge_slot(kf, e, slots))
-                    g = ctu_part(w, C, rec[cell, _inv_rho_at(2)], -1.0 / (2.0 * h), a0, a1,
-                                 (rec[cell, z], rec[cell, z + 1], rec[cell, z + 2], rec[cell, z + 3], rec[cell, z + 4],
-                                  rec[cell, z + 5], rec[cell, z + 6], rec[cell, z + 7]))
-                    if interior:
-                        s = sign[k]
-                        for c in range(6):
-                            u[c] += s * g[c]
-                    elif q == 0:
-                        for c in range(6):
-                            g_p[c] = g[c]
-                    else:                       # as `boundary_edge_corrections` adds them
-                        for c in range(6):
-                            u[c] += g_p[c] - g[c]
-            for c in range(6):
-                if interior:
-                    corr[j, c] = u[c]
-                else:
-                    corr_bnd[j - hi, c] = u[c]
-    return edge_corrections
+                        g, g_o = (G_a[i], G_b[i]) if q == 0 else (G_b[i], G_a[i])
+                        if s >= 0:
+                            W[s, i] = g
+                        else:
+                            corr_bnd[-1 - s, i] = g - g_o
+    return cell_corrections
+
+
+def face_corrections(corr):
+    """The CTU correction per unit Delta t of each interior face (nf, nc) from `interface_flux`'s
+    (nf, sides, nc): the parts both cells send (sides 2: W[:, 0] - W[:, 1], `cell_corrections`),
+    the gathered correction (sides 1), none (sides 0, DCU)."""
+    if corr.shape[1] == 2:
+        return corr[:, 0] - corr[:, 1]
+    return corr[:, 0] if corr.shape[1] == 1 else np.zeros((len(corr), corr.shape[2]))
 
 
 @njit(cache=True, nogil=True)
@@ -473,15 +465,16 @@ def euler_update(gather, flux, corr, dt, Q, stiffness, base, weight, out):
     """out = base + w (volume + G (flux + dt corr)) node by node: a forward Euler stage but its
     boundary terms in one pass over the nodes, the volume term sum_alpha K^alpha F_alpha(Q) of the
     nodal Q computed row by row in the same pass (`system.volume_row`: never stored), given the
-    interior faces' fluxes and corrections per unit Delta t (nf, nc) and w = step M^-1 given as
-    ``weight`` = (step, inv_M (n_dofs,)).
+    interior faces' fluxes (nf, nc) and corrections per unit Delta t as `interface_flux` gives
+    them (nf, sides, nc), `face_corrections`, and w = step M^-1 given as ``weight`` = (step,
+    inv_M (n_dofs,)).
     G (n_dofs, nf) is the interior surface integral as a gather (`DGMPM.gather_interior`): row i
     holds measure_f (T_R - T_L)[f, i] over the faces f of node i."""
-    _euler_update(flux.shape[1])(gather, flux, corr, dt, Q, stiffness, base, weight, out)
+    _euler_update(flux.shape[1], corr.shape[1])(gather, flux, corr, dt, Q, stiffness, base, weight, out)
 
 
 @kernel_factory
-def _euler_update(nc):                  # a literal width: the loops unrolled
+def _euler_update(nc, sides):           # literals: the loops unrolled, the corrections read as they are kept
     d = DIMENSION[nc]
 
     def euler_update(gather, flux, corr, dt, Q, stiffness, base, weight, out):
@@ -495,7 +488,12 @@ def _euler_update(nc):                  # a literal width: the loops unrolled
             for k in range(indptr[i], indptr[i + 1]):
                 f, g = indices[k], data[k]
                 for c in range(nc):
-                    r[c] += g * (flux[f, c] + dt * corr[f, c])
+                    if sides == 2:
+                        r[c] += g * (flux[f, c] + dt * (corr[f, 0, c] - corr[f, 1, c]))
+                    elif sides == 1:
+                        r[c] += g * (flux[f, c] + dt * corr[f, 0, c])
+                    else:
+                        r[c] += g * flux[f, c]
             for c in range(nc):
                 out[i, c] = base[i, c] + (step * inv_M[i]) * r[c]
     return euler_update

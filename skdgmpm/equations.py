@@ -282,13 +282,6 @@ def ctu_parts(w, C, inv_rho, scale, a0, a1, b0, b1, Z_a, Z_b):
 
 
 @njit(cache=True, inline="always")
-def ctu_part(w, C, inv_rho, scale, a0, a1, Z_a):
-    """The one part G_a of `ctu_parts` for the edge of normal a (an edge that gathers the parts it
-    receives computes each of them alone: the same numbers as `ctu_parts` gives)."""
-    return _edge_split(w, _stress_change(C, w), a0, a1, inv_rho, scale, Z_a)
-
-
-@njit(cache=True, inline="always")
 def _stress_change(C, w):
     """m = C : w_F (row-major 4-tuple) of a fluctuation w (6,), 2D."""
     return (C[0, 0, 0, 0] * w[0] + C[0, 0, 0, 1] * w[1] + C[0, 0, 1, 0] * w[2] + C[0, 0, 1, 1] * w[3],
