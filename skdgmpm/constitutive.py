@@ -5,24 +5,28 @@ from functools import cached_property
 import numpy as np
 from numba import njit
 
-from skdgmpm.materials.points import law_table, stress_update_point
+from skdgmpm.materials.points import law_table, stress_update_point, tangent_call, tangent_point
 
 from .equations import embed as _embed_point
+from .health import Health, health_point, identity_if_not
 from . import parallel
 from .kernel_cache import kernel_factory, scratch
 from .system import DIMENSION, embed
 
 
 @kernel_factory
-def _states(d):                         # a literal d: the loops unrolled
+def _states(d, assess):                 # literals: the loops unrolled, the health computed or not
     dd, nc = d * d, d * d + d
 
-    def states(laws, params, index, U, rho, h_n, h, Q):
+    def states(laws, params, index, U, rho, h_n, h, Q, health):
         """Each point's row copied into stack scratch: a row view (U[k], h[k]) handed to the
-        inlined law would be reference counted at every point (half the time of the pass)."""
-        F, P, u = scratch((3, 3)), scratch((d, d)), scratch((nc,))
+        inlined law would be reference counted at every point (half the time of the pass). With
+        ``assess``, also the point's health (`skdgmpm.health.health_point`) at the law's tangent,
+        into ``health`` = (finite, J, lowest, speed, densities of the materials)."""
+        F, P, u, C = scratch((3, 3)), scratch((d, d)), scratch((nc,)), scratch((d, d, d, d))
         n_h = h_n.shape[1]
         h_k_n, h_k = scratch((n_h,)), scratch((n_h,))
+        finite, J, lowest, speed, rho_m = health
         for k in range(len(U)):
             for c in range(nc):
                 u[c] = U[k, c]
@@ -33,10 +37,24 @@ def _states(d):                         # a literal d: the loops unrolled
             stress_update_point(laws[m], params[m], F, h_k_n, h_k, P, d)
             for c in range(n_h):
                 h[k, c] = h_k[c]
+            ok = True
             for i in range(d):
                 for a in range(d):
                     Q[k, i * d + a] = P[i, a]
+                    ok = ok and np.isfinite(P[i, a])
                 Q[k, dd + i] = u[dd + i] / rho[k]
+                ok = ok and np.isfinite(Q[k, dd + i])
+            if assess:
+                for c in range(nc):
+                    ok = ok and np.isfinite(u[c])
+                finite[k] = ok
+                identity_if_not(ok, F)
+                if d == 1:
+                    tangent_call(laws[m], params[m], F, C, d)
+                else:
+                    tangent_point(laws[m], params[m], F, C, d)
+                J[k], lo, speed[k] = health_point(F, C, rho_m[m], d)
+                lowest[k] = lo if ok else np.nan
     return states
 
 
@@ -86,19 +104,39 @@ class MaterialSet:
         """The history column ``name`` of the points (n,), or None if no law has it."""
         return history[:, self.history_names.index(name)] if name in self.history_names else None
 
+    @cached_property
+    def densities(self):
+        """Reference density of each material (n_mat,): the wave speeds of the health check."""
+        return np.array([m.rho for m in self.materials])
+
     def update(self, U, index, rho, history):
         """(Q, history_{n+1}): Q = [P(F, history_n), p / rho0] from states U = [F, p] (n, d*d + d),
         densities rho (n,) and the internal variables of t_n (n, n_history), with their update;
         one compiled pass over the points (no embedded copies, masks or per-law batches)."""
+        return self._update(U, index, rho, history, False)[:2]
+
+    def update_and_assess(self, U, index, rho, history):
+        """`update` and the new state's `skdgmpm.health.Health` in the same pass over the points
+        (the law's tangent at F beside its stress: F embedded once, the state read once)."""
+        return self._update(U, index, rho, history, True)
+
+    def _update(self, U, index, rho, history, assess):
         if history is None:
             history = self.initial_history(np.asarray(index)) if self.n_history else np.empty((len(U), 0))
+        n = len(U)
         Q, h = np.empty(U.shape), np.empty_like(history)
+        health = ((np.empty(n, dtype=np.bool_), np.empty(n), np.empty(n), np.empty(n), self.densities) if assess else
+                  (np.empty(0, dtype=np.bool_), np.empty(0), np.empty(0), np.empty(0), self.densities))
         d = DIMENSION[U.shape[1]]
-        (laws, params), kernel = self.laws, _states(d)
+        (laws, params), kernel = self.laws, _states(d, assess)
         index, rho = np.asarray(index, dtype=np.int64), np.asarray(rho, dtype=float)
-        parallel.rows(len(U), lambda lo, hi: kernel(laws, params, index[lo:hi], U[lo:hi], rho[lo:hi], history[lo:hi],
-                                                    h[lo:hi], Q[lo:hi]))
-        return Q, h
+        rows = (lambda lo, hi: tuple(a[lo:hi] for a in health[:4]) + health[4:]) if assess else (lambda lo, hi: health)
+        parallel.rows(n, lambda lo, hi: kernel(laws, params, index[lo:hi], U[lo:hi], rho[lo:hi], history[lo:hi],
+                                               h[lo:hi], Q[lo:hi], rows(lo, hi)))
+        if not assess:
+            return Q, h, None
+        finite, J, lowest, speed, _ = health
+        return Q, h, Health(finite, np.where(finite, J, 1.0), lowest, speed)
 
     def state(self, U, index, rho, history=None):
         """Q = [P(F), p / rho0] from states U = [F, p] (n, d*d + d) and densities rho (n,), with

@@ -237,11 +237,12 @@ class DGFEM(GodunovScheme):
     def evaluate_points(self, state, dofs, dt):
         """State at the Gauss points from the dofs; positions advanced with the new velocity."""
         U = parallel.matmul(self.B, dofs)
-        Q, history = self.materials.update(U, self.cell_material[self.gauss.cell], self.gauss.rho0, state.history)
+        Q, history, health = self.materials.update_and_assess(U, self.cell_material[self.gauss.cell], self.gauss.rho0,
+                                                              state.history)
         v = Q[:, self.d * self.d:]
         new = ParticleState(state.t + dt, U, Q, advance_positions(state, v, dt, self.d), state.step + 1,
                             dofs=dofs, history=history)
-        self.check(new)
+        self.check(new, health)
         return new
 
     # ---------------------------------------------------------------- driver-facing

@@ -13,7 +13,7 @@ from numba import njit
 
 from skdgmpm.materials.points import tangent_call, tangent_point
 
-from .equations import acoustic, embed
+from .equations import embed
 from . import parallel
 from .kernel_cache import kernel_factory, scratch
 from .system import DIMENSION
@@ -75,71 +75,94 @@ class Health:
                    f"{self.omega[p]:.6g} Pa")
 
 
+@njit(cache=True, inline="always")
+def health_point(F, C, rho, d):
+    """(J, lowest, speed) of one point with embedded F (3, 3) and tangent C (d, d, d, d): J = det F,
+    the smallest eigenvalue of the symmetrised acoustic tensors A(N)_ij = C_iajb N_a N_b over
+    `directions` (closed forms for d <= 2; in 2D A along the axes is a block of C, along the
+    diagonals half the sum of four blocks), the fastest wave sqrt(largest / rho) along the axes."""
+    if d == 1:
+        return F[0, 0], C[0, 0, 0, 0], np.sqrt(max(C[0, 0, 0, 0], 0.0) / rho)
+    if d == 2:
+        J = F[0, 0] * F[1, 1] - F[0, 1] * F[1, 0]
+        lo, hi = np.inf, -np.inf
+        for k in range(4):
+            if k < 2:                       # along axis k: the block C[:, k, :, k]
+                a00, a01, a10, a11 = C[0, k, 0, k], C[0, k, 1, k], C[1, k, 0, k], C[1, k, 1, k]
+            else:                           # (E1 +- E2) / sqrt(2): (C_11 + C_22 +- (C_12 + C_21)) / 2 blocks
+                sg = 1.0 if k == 2 else -1.0
+                a00 = 0.5 * (C[0, 0, 0, 0] + C[0, 1, 0, 1] + sg * (C[0, 0, 0, 1] + C[0, 1, 0, 0]))
+                a01 = 0.5 * (C[0, 0, 1, 0] + C[0, 1, 1, 1] + sg * (C[0, 0, 1, 1] + C[0, 1, 1, 0]))
+                a10 = 0.5 * (C[1, 0, 0, 0] + C[1, 1, 0, 1] + sg * (C[1, 0, 0, 1] + C[1, 1, 0, 0]))
+                a11 = 0.5 * (C[1, 0, 1, 0] + C[1, 1, 1, 1] + sg * (C[1, 0, 1, 1] + C[1, 1, 1, 0]))
+            mean = 0.5 * (a00 + a11)        # eigenvalues of the symmetric part in closed form
+            x, y = 0.5 * (a00 - a11), 0.5 * (a01 + a10)
+            r = np.sqrt(x * x + y * y)
+            lo = min(lo, mean - r)
+            if k < 2:
+                hi = max(hi, mean + r)
+        return J, lo, np.sqrt(max(hi, 0.0) / rho)
+    return _health_3d(F, C, rho)
+
+
+@njit(cache=True)
+def _health_3d(F, C, rho):
+    """`health_point` for d = 3 (eigen-decompositions along the axes), compiled once and called
+    (an inlined branch would be compiled into every 1D and 2D kernel)."""
+    J = (F[0, 0] * (F[1, 1] * F[2, 2] - F[1, 2] * F[2, 1]) + F[0, 1] * (F[1, 2] * F[2, 0] - F[1, 0] * F[2, 2])
+         + F[0, 2] * (F[1, 0] * F[2, 1] - F[1, 1] * F[2, 0]))
+    lo, hi, A = np.inf, -np.inf, np.empty((3, 3))
+    for k in range(3):
+        for i in range(3):
+            for j in range(3):
+                A[i, j] = 0.5 * (C[i, k, j, k] + C[j, k, i, k])
+        omega = np.linalg.eigvalsh(A)
+        lo, hi = min(lo, omega[0]), max(hi, omega[-1])
+    return J, lo, np.sqrt(max(hi, 0.0) / rho)
+
+
+@njit(cache=True, inline="always")
+def identity_if_not(ok, F):
+    """F = I where a point's values are not finite (its health is then that of the identity)."""
+    if not ok:
+        for i in range(3):
+            for a in range(3):
+                F[i, a] = 1.0 if i == a else 0.0
+
+
 @kernel_factory
 def _assess(d):                         # a literal d: the (d, d) loops unrolled
-    def assess(U, Q, material, laws, params, rho, N, n_axes, finite, J, lowest, speed):
-        """Per point p: finite = all of U and Q finite; J = det F (1 where not finite); the
-        eigenvalues of the symmetrised acoustic tensors of the tangent at F (I where not finite)
-        along the directions N (a tuple of n_dir d-tuples): the smallest over all of them into
-        ``lowest`` (nan where not finite), the fastest wave sqrt(largest / rho) over the first
-        ``n_axes`` into ``speed``. One pass: the law's point tangent (`materials.points`), closed
-        forms for d <= 2."""
-        F, C, A, u = scratch((3, 3)), scratch((d, d, d, d)), scratch((d, d)), scratch((d * d + d,))
+    def assess(U, Q, material, laws, params, rho, finite, J, lowest, speed):
+        """Per point p: finite = all of U and Q finite; J, the smallest acoustic eigenvalue
+        (nan where not finite) and the fastest wave along the axes at the law's point tangent
+        (`health_point`; at F = I where not finite)."""
+        F, C, u = scratch((3, 3)), scratch((d, d, d, d)), scratch((d * d + d,))
         for p in range(len(U)):
             ok = True
             for k in range(d * d + d):        # U.shape[1], a literal count
                 u[k] = U[p, k]              # a copy, not the view U[p]: no reference counting
                 ok = ok and np.isfinite(u[k]) and np.isfinite(Q[p, k])
             finite[p] = ok
-            if ok:
-                embed(u, F, d)
-            else:                           # I where not finite
-                for i in range(3):
-                    for a in range(3):
-                        F[i, a] = 1.0 if i == a else 0.0
-            if d == 1:
-                J[p] = F[0, 0]
-            elif d == 2:
-                J[p] = F[0, 0] * F[1, 1] - F[0, 1] * F[1, 0]
-            else:
-                J[p] = (F[0, 0] * (F[1, 1] * F[2, 2] - F[1, 2] * F[2, 1])
-                        + F[0, 1] * (F[1, 2] * F[2, 0] - F[1, 0] * F[2, 2])
-                        + F[0, 2] * (F[1, 0] * F[2, 1] - F[1, 1] * F[2, 0]))
+            embed(u, F, d)
+            identity_if_not(ok, F)
             m = material[p]
             if d == 1:
                 tangent_call(laws[m], params[m], F, C, d)
             else:
                 tangent_point(laws[m], params[m], F, C, d)
-            lo, hi = np.inf, -np.inf
-            for k in range(len(N)):
-                acoustic(C, N[k], 1.0, A, d)
-                if d == 1:
-                    small = large = A[0, 0]
-                elif d == 2:                # eigenvalues of the symmetric part in closed form
-                    mean = 0.5 * (A[0, 0] + A[1, 1])
-                    x, y = 0.5 * (A[0, 0] - A[1, 1]), 0.5 * (A[0, 1] + A[1, 0])
-                    r = np.sqrt(x * x + y * y)
-                    small, large = mean - r, mean + r
-                else:
-                    omega = np.linalg.eigvalsh(0.5 * (A + A.T))
-                    small, large = omega[0], omega[-1]
-                lo = min(lo, small)
-                if k < n_axes:
-                    hi = max(hi, large)
+            J[p], lo, speed[p] = health_point(F, C, rho[m], d)
             lowest[p] = lo if ok else np.nan
-            speed[p] = np.sqrt(max(hi, 0.0) / rho[m])
     return assess
 
 
 def assess(materials, points, U, Q):
-    """`Health` of the state (U, Q) at ``points`` (with ``material``) for a `MaterialSet`."""
+    """`Health` of the state (U, Q) at ``points`` (with ``material``) for a `MaterialSet` (the
+    law's pass computes it with the stress: `MaterialSet.update_and_assess`)."""
     n, nc = U.shape
     d = DIMENSION[nc]
     laws, params = materials.laws                                        # built once per set
-    rho = np.array([m.rho for m in materials.materials])
     finite, J, lowest, speed = np.empty(n, dtype=np.bool_), np.empty(n), np.empty(n), np.empty(n)
-    N = tuple(tuple(float(x) for x in n) for n in directions(d))       # a literal count: unrolled
-    material, kernel = np.asarray(points.material, dtype=np.int64), _assess(d)
-    parallel.rows(n, lambda lo, hi: kernel(U[lo:hi], Q[lo:hi], material[lo:hi], laws, params, rho, N, d,
+    material, kernel, rho = np.asarray(points.material, dtype=np.int64), _assess(d), materials.densities
+    parallel.rows(n, lambda lo, hi: kernel(U[lo:hi], Q[lo:hi], material[lo:hi], laws, params, rho,
                                            finite[lo:hi], J[lo:hi], lowest[lo:hi], speed[lo:hi]))
     return Health(finite, np.where(finite, J, 1.0), lowest, speed)

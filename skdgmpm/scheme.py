@@ -243,10 +243,11 @@ class GodunovScheme:
         by the trapezoidal rule (second order, so displacement errors measure the scheme, not
         the position update)."""
         d = self.d
-        Q, history = self.materials.update(U, self.particles.material, self.particles.rho0, state.history)
+        Q, history, health = self.materials.update_and_assess(U, self.particles.material, self.particles.rho0,
+                                                              state.history)
         new = ParticleState(state.t + dt, U, Q, advance_positions(state, Q[:, d * d:], dt, d), state.step + 1,
                             history=history)
-        self.check(new)
+        self.check(new, health)
         return new
 
     def initial_state(self, F, v, t=0.0):
@@ -280,11 +281,13 @@ class GodunovScheme:
         return new
 
     @stage
-    def check(self, state):
+    def check(self, state, health=None):
         """Stop on non-finite values, J <= 0 or lost hyperbolicity, naming the step, time, point,
         cell, quantity and value (`skdgmpm.health`); sets the wave speeds of ``state`` used by the
-        next time step and its ``health`` record (min J, smallest acoustic eigenvalue)."""
-        health = assess(self.materials, self.particles, state.U, state.Q)
+        next time step and its ``health`` record (min J, smallest acoustic eigenvalue). ``health``:
+        the state's, if the law's pass computed it (`MaterialSet.update_and_assess`)."""
+        if health is None:
+            health = assess(self.materials, self.particles, state.U, state.Q)
         state.speed, state.health = health.speed, health.record()
         failure = health.first_failure(state, self.particles, self.d)
         if failure is not None:

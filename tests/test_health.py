@@ -73,3 +73,39 @@ def test_a_healthy_run_records_min_j_and_the_smallest_acoustic_eigenvalue():
     assert np.all(h["min_acoustic"] > 0)
     s = r.summary()["health"]
     assert s["min_J_min"] == h["min_J"].min() and s["min_acoustic_min"] == h["min_acoustic"].min()
+
+
+@pytest.mark.parametrize("d", [1, 2])
+def test_the_law_pass_assesses_the_state_as_the_stand_alone_check_and_numpy_do(d):
+    """`MaterialSet.update_and_assess` (health beside the stress, one pass) gives the same arrays
+    as `health.assess` on its result, and both the numbers of an independent computation: J = det F,
+    numpy's eigenvalues of the symmetrised acoustic tensors C_iajb N_a N_b of the law's batched
+    tangent along `directions`, the fastest along the axes; two laws, one point not finite."""
+    from types import SimpleNamespace
+    from skdgmpm import system
+    from skdgmpm.constitutive import MaterialSet
+    from skdgmpm.health import assess, directions
+    from skdgmpm.materials import NeoHookean, SaintVenantKirchhoff
+
+    rng = np.random.default_rng(3)
+    n = 40
+    materials = MaterialSet((NeoHookean(E=200e9, nu=0.3, rho=7800.0), SaintVenantKirchhoff(E=70e9, nu=0.33, rho=2700.0)))
+    index = rng.integers(0, 2, n)
+    F = np.eye(d)[None] + 0.15 * rng.standard_normal((n, d, d))
+    U = system.join(F, rng.standard_normal((n, d)))
+    U[7, 0] = np.nan
+    rho0 = materials.densities[index]
+    Q, _, fused = materials.update_and_assess(U, index, rho0, None)
+    alone = assess(materials, SimpleNamespace(material=index), U, Q)
+    for name in ("finite", "J", "omega", "speed"):
+        np.testing.assert_array_equal(getattr(fused, name), getattr(alone, name), err_msg=name)
+
+    ok = np.arange(n) != 7
+    assert list(fused.finite) == list(ok) and np.isnan(fused.omega[7])
+    C = materials.tangent(F[ok], index[ok])
+    A = np.einsum("piajb,ka,kb->pkij", C, directions(d), directions(d))
+    omega = np.linalg.eigvalsh(0.5 * (A + A.transpose(0, 1, 3, 2)))
+    np.testing.assert_allclose(fused.J[ok], np.linalg.det(F[ok]), rtol=1e-14)
+    np.testing.assert_allclose(fused.omega[ok], omega[..., 0].min(axis=1), rtol=1e-12, atol=1e-12 * np.abs(omega).max())
+    speed = np.sqrt(np.maximum(omega[:, :d, -1].max(axis=1), 0.0) / materials.densities[index[ok]])
+    np.testing.assert_allclose(fused.speed[ok], speed, rtol=1e-14)
