@@ -150,6 +150,19 @@ def _copy_record(rec, state, c, r):
 
 
 @njit(cache=True, inline="always")
+def _copy_side(rec, state, c, slot, q, Z, d):
+    """What a face reads of the record of cell c: its state into q[:nc] and its impedance along
+    the face direction ``slot`` into Z (10 of a 2D record's 39 numbers); whether it is admissible."""
+    for k in range(d * d + d):
+        q[k] = rec[c, k]
+    o = _impedance_at(d, slot)
+    for i in range(d):
+        for j in range(d):
+            Z[i, j] = rec[c, o + i * d + j]
+    return state[c] == 1
+
+
+@njit(cache=True, inline="always")
 def _record_tangent(r, C, d):
     """C (d, d, d, d) of a side record."""
     o = _tangent_at(d)
@@ -199,11 +212,11 @@ def _cell_records(d, slots, nodes):
         for c in range(len(dofs)):          # rows copied into stack scratch: no array views (their
             n0 = dofs[c, 0]                 # reference counting costs more than the copies)
             same = True
-            for k in range(1, nodes):
+            for k in range(1, nodes):           # & not and: no branch per number
                 n = dofs[c, k]
-                same = same and rho[n] == rho[n0]
+                same &= rho[n] == rho[n0]
                 for j in range(nc):
-                    same = same and U[n, j] == U[n0, j] and Q[n, j] == Q[n0, j]
+                    same &= (U[n, j] == U[n0, j]) & (Q[n, j] == Q[n0, j])
             if not same:
                 state[c] = 0
                 continue
@@ -256,8 +269,9 @@ def _interior_pass(d, slots, recorded):     # literals: the loops unrolled, the 
         n, v_L, v_R, o = scratch((d,)), scratch((d,)), scratch((d,)), scratch((nc,))
         for f in range(len(N)):
             c_L, c_R = cell_L[f], cell_R[f]
-            if recorded:                        # every cell recorded: no trace read
-                ok_L, ok_R = _copy_record(rec, state, c_L, s_L), _copy_record(rec, state, c_R, s_R)
+            if recorded:                        # every cell recorded: no trace read, no tangent needed
+                ok_L = _copy_side(rec, state, c_L, k_L[f] % slots, s_L, Z_L, d)
+                ok_R = _copy_side(rec, state, c_R, k_R[f] % slots, s_R, Z_R, d)
             else:
                 if state[c_L] == 0:                 # the nodes differ: the trace's record
                     rho_f = _gather(T_L, f, U, Q, rho, q, F, d)
@@ -279,10 +293,10 @@ def _interior_pass(d, slots, recorded):     # literals: the loops unrolled, the 
                     ok_R = _fill_record(q, rho_f, C_R, normals[c_R], s_R, d, slots)
                 else:
                     ok_R = _copy_record(rec, state, c_R, s_R)
+                _record_impedance(s_L, k_L[f] % slots, Z_L, d)
+                _record_impedance(s_R, k_R[f] % slots, Z_R, d)
             if not (ok_L and ok_R):
                 return f
-            _record_impedance(s_L, k_L[f] % slots, Z_L, d)
-            _record_impedance(s_R, k_R[f] % slots, Z_R, d)
             for i in range(d):              # rows copied, not viewed (views are reference counted)
                 n[i], v_L[i], v_R[i] = N[f, i], s_L[dd + i], s_R[dd + i]
             traction(s_L, n, t_L, d)
