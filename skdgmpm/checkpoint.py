@@ -8,7 +8,8 @@
   ``external_work`` and ``dt_trend`` (every stepper), ``picard`` (ADER: predictor iteration counts) and
   ``limited_cells`` (DGFEM: the limiter's count). Everything else a stepper sets while stepping
   is a cache rebuilt from the state at the start of each step (DGMPM ``_kept``, DGFEM and ADER
-  ``history_n``, ADER ``_repeated``, MPM ``_last_shape``: arrays the next step overwrites);
+  ``history_n``, ADER ``_repeated``, MPM ``_last_shape``: arrays the next step overwrites; DGMPM
+  ``_split``: set-up from the grid, built when first needed);
   tests/test_checkpoint.py checks that a step changes nothing
   else;
 - the scene as run (overrides applied) with its path (mesh files resolve against it), the run's

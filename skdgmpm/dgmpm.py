@@ -134,24 +134,17 @@ class DGMPM(GodunovScheme):
         self.cell_normals = np.ascontiguousarray(normals[:, :half] if parallel_pairs else normals)
 
     def _setup_transverse(self):
-        """CTU set-up: the boundary faces' `side_topology`; what the cells read to send their
-        parts (`_cell_sources`); for a step where a cell is not recorded, the interior faces'
-        sides (h, normals (nf, 2, 2)) (face-major: a chunk of faces is a slice) and the edges'
-        gathers of the parts (`_edge_gathers`): each face writes its own parts, each edge sums
-        those it receives, the same for any thread count. DCU: empty."""
+        """CTU set-up: the boundary faces' `side_topology` and what the cells read to send their
+        parts (`_cell_sources`); the faces' split, for a step where a cell is not recorded, is
+        set up when first needed (`_split_topology`). DCU: empty."""
         empty = (np.zeros(0), np.zeros((2, 0, 2)), np.zeros((2, 0), np.int64), np.zeros((2, 0), np.int64),
                  np.zeros((2, 0)))
-        self.ctu = None
+        self.ctu, self._split = None, None
         self.topology = {"boundary": empty}
-        self.split_topology = {"L": (empty[0], np.zeros((0, 2, 2))), "R": (empty[0], np.zeros((0, 2, 2)))}
         if self.transverse != "ctu" or self.d != 2:
             return
         self.topology["boundary"] = self.side_topology("boundary")
-        sides = {side: self.side_topology(side) for side in ("L", "R")}
-        for side, (h, n, *_) in sides.items():
-            self.split_topology[side] = (h, np.ascontiguousarray(n.transpose(1, 0, 2)))
-        self.to_interior, self.to_boundary = self._edge_gathers(sides)
-        self.cell_sources = self._cell_sources(sides)
+        self.cell_sources = self._cell_sources()
         frame = np.zeros((len(self.boundary), 2, 2))
         free_v = np.zeros((len(self.boundary), 2), bool)
         free_t = np.zeros((len(self.boundary), 2), bool)
@@ -160,7 +153,19 @@ class DGMPM(GodunovScheme):
             free_v[sel], free_t[sel] = ~imp_v, ~imp_t
         self.ctu = self._boundary_filter(frame, free_v, free_t)
 
-    def _cell_sources(self, sides):
+    def _split_topology(self):
+        """What the faces' CTU split reads when a cell is not recorded (more than one particle in
+        it): the interior faces' sides (h, normals (nf, 2, 2)) (face-major: a chunk of faces is a
+        slice) and the edges' gathers of the parts (`_edge_gathers`): each face writes its own
+        parts, each edge sums those it receives, the same for any thread count. Built on first
+        need and kept (with one particle per cell it never is: 208 B per cell not held)."""
+        if self._split is None:
+            sides = {side: self.side_topology(side) for side in ("L", "R")}
+            split = {side: (h, np.ascontiguousarray(n.transpose(1, 0, 2))) for side, (h, n, *_) in sides.items()}
+            self._split = (split, *self._edge_gathers(sides))
+        return self._split
+
+    def _cell_sources(self):
         """What `cell_corrections` reads per cell and local face k (n_cells, 4): the row of the
         face's fluctuation entering the cell, 2 f + side (int32; -1 - b for boundary face b), its
         scale -1 / (2 h) (0 at boundary faces), and the sign that makes the cell's face direction
@@ -174,7 +179,7 @@ class DGMPM(GodunovScheme):
         sources[b.cell_L, k_b], outward[b.cell_L, k_b] = -1 - np.arange(len(b)), b.normal
         for s, (cells, k, sign) in enumerate(((f.cell_L, self.local_face[0], 1.0), (f.cell_R, self.local_face[1], -1.0))):
             sources[cells, k] = 2 * np.arange(len(f)) + s
-            scale[cells, k] = -1.0 / (2.0 * sides["LR"[s]][0])
+            scale[cells, k] = -1.0 / (2.0 * (self.cell_volume[cells] / f.measure))     # h as `side_topology`
             outward[cells, k] = sign * f.normal
         direction = self.cell_normals[:, np.arange(4) % slots]
         signs = np.where(np.all(outward == direction, axis=2), 1, -1).astype(np.int8)
@@ -206,7 +211,6 @@ class DGMPM(GodunovScheme):
         ctu = self.ctu is not None
         flux, corr_bnd = np.empty((len(f), nc)), np.zeros((len(self.boundary), nc))
         T_L, T_R, rho, laws = self.traces["L"], self.traces["R"], self.map.rho, self.laws
-        (h_L, n_L), (h_R, n_R) = self.split_topology["L"], self.split_topology["R"]
         csr = parallel.csr_rows
 
         dofs, normals = self.cell_dofs, self.cell_normals
@@ -221,6 +225,12 @@ class DGMPM(GodunovScheme):
         # sends the parts of those entering it (`cell_corrections`), in place; otherwise the faces
         # split them and keep the parts (nf, 4, nc), which each edge gathers
         G = self._buffer("fluctuations", (len(f) if ctu else 0, 2 if recorded else 4, nc))
+        if ctu and not recorded:
+            split, to_interior, to_boundary = self._split_topology()
+            (h_L, n_L), (h_R, n_R) = split["L"], split["R"]
+        else:                                   # not read
+            h_L = h_R = np.zeros(0)
+            n_L = n_R = np.zeros((0, 2, 2))
 
         def faces(lo, hi):
             sl = slice(lo, hi) if ctu else slice(0, 0)
@@ -240,8 +250,8 @@ class DGMPM(GodunovScheme):
         if ctu:
             corr = np.empty((len(f), 1, nc))
             parts = G.reshape(-1, nc)               # each edge: sum_k sign_k G[part_k], in face order
-            parallel.matmul(self.to_interior, parts, corr[:, 0])
-            boundary_edge_corrections(self.to_boundary, parts, corr_bnd)
+            parallel.matmul(to_interior, parts, corr[:, 0])
+            boundary_edge_corrections(to_boundary, parts, corr_bnd)
             return flux, corr, corr_bnd
         return flux, np.empty((len(f), 0, nc)), corr_bnd
 
