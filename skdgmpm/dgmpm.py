@@ -215,7 +215,7 @@ class DGMPM(GodunovScheme):
 
         dofs, normals = self.cell_dofs, self.cell_normals
         n_cells, (k_L, k_R) = len(dofs), self.local_face
-        rec = self._buffer("records", (n_cells, record_width(self.d, normals.shape[1])))
+        rec = self._buffer("records", (n_cells, record_width(self.d, normals.shape[1], ctu)))
         state = self._buffer("record states", n_cells, np.int8)
         parallel.rows(n_cells, lambda lo, hi: cell_records(
             dofs[lo:hi], grid_state.U, grid_state.Q, rho, self.cell_material[lo:hi], *laws, normals[lo:hi], rec[lo:hi],

@@ -80,22 +80,30 @@ def _add_boundary_edges(edge_bnd, f, G_0, G_1, corr_bnd):
 
 
 # ---------------------------------------------------------------- side records
-# The layout of a side record, written once: q (nc), 1 / rho, the tangent C (d^4), then per face
-# direction of the cell (``slots``) its impedance Z = sqrt(rho A_n) and Z^-1 (d * d each).
-@njit(cache=True, inline="always")
-def _inv_rho_at(d):
-    return d * d + d
-
-
-@njit(cache=True, inline="always")
-def _tangent_at(d):
-    return d * d + d + 1
-
-
+# The layout of a side record, written once: what a face reads, q (nc) and per face direction of
+# the cell (``slots``) its impedance Z = sqrt(rho A_n) (d * d each); then, for CTU's split only,
+# 1 / rho, the tangent C (d^4) and per face direction Z^-1 (d * d each). DCU's records stop
+# after the face part (14 numbers in 2D, not 39: the bytes a record pass writes).
 @njit(cache=True, inline="always")
 def _impedance_at(d, slot):
-    """Where Z along the face direction ``slot`` starts (Z^-1 follows, d * d later)."""
-    return d * d + d + 1 + d ** 4 + 2 * d * d * slot
+    """Where Z along the face direction ``slot`` starts."""
+    return d * d + d + d * d * slot
+
+
+@njit(cache=True, inline="always")
+def _inv_rho_at(d, slots):
+    return d * d + d + d * d * slots
+
+
+@njit(cache=True, inline="always")
+def _tangent_at(d, slots):
+    return d * d + d + d * d * slots + 1
+
+
+@njit(cache=True, inline="always")
+def _inverse_impedance_at(d, slots, slot):
+    """Where Z^-1 along the face direction ``slot`` starts (a split record)."""
+    return d * d + d + d * d * slots + 1 + d ** 4 + d * d * slot
 
 
 @njit(cache=True, inline="always")
@@ -105,38 +113,41 @@ def _edge_slot(k, e, slots):
     return ((k + 1 + 2 * e) % 4) % slots
 
 
-def record_width(d, slots):
-    """Entries of one side record (see `_impedance_at`)."""
-    return d * d + d + 1 + d ** 4 + 2 * d * d * slots
+def record_width(d, slots, split=True):
+    """Entries of one side record: its face part, and with ``split`` (CTU) its split part."""
+    return d * d + d + d * d * slots + ((1 + d ** 4 + d * d * slots) if split else 0)
 
 
 @njit(cache=True, inline="always")
-def _fill_record(q, rho, C, normals, r, d, slots):
+def _fill_record(q, rho, C, normals, r, d, slots, split):
     """The side record r of a state (q, rho) with tangent C, its impedances along the cell's face
-    directions normals (slots, d); False where an acoustic tensor is not positive definite."""
-    nc, dd = d * d + d, d * d
+    directions normals (slots, d), with its split part if ``split``; False where an acoustic
+    tensor is not positive definite."""
+    nc = d * d + d
     Z, Zi = scratch((d, d)), scratch((d, d))
     for k in range(nc):
         r[k] = q[k]
-    r[_inv_rho_at(d)] = 1.0 / rho
-    o = _tangent_at(d)
-    for i in range(d):
-        for a in range(d):
-            for j in range(d):
-                for b in range(d):
-                    r[o] = C[i, a, j, b]
-                    o += 1
+    if split:
+        r[_inv_rho_at(d, slots)] = 1.0 / rho
+        o = _tangent_at(d, slots)
+        for i in range(d):
+            for a in range(d):
+                for j in range(d):
+                    for b in range(d):
+                        r[o] = C[i, a, j, b]
+                        o += 1
     ok = True
     n = scratch((d,))
     for s in range(slots):
         for i in range(d):
             n[i] = normals[s, i]
         ok = impedance(C, n, rho, Z, Zi, d) and ok
-        o = _impedance_at(d, s)
+        o, oi = _impedance_at(d, s), _inverse_impedance_at(d, slots, s)
         for i in range(d):
             for j in range(d):
                 r[o + i * d + j] = Z[i, j]
-                r[o + dd + i * d + j] = Zi[i, j]
+                if split:
+                    r[oi + i * d + j] = Zi[i, j]
     return ok
 
 
@@ -144,7 +155,7 @@ def _fill_record(q, rho, C, normals, r, d, slots):
 def _copy_record(rec, state, c, r):
     """Row c of the cell records into the side record r (stack scratch: no array view, whose
     reference counting would cost more than the copy); whether it is admissible."""
-    for k in range(len(r)):
+    for k in range(rec.shape[1]):
         r[k] = rec[c, k]
     return state[c] == 1
 
@@ -163,9 +174,9 @@ def _copy_side(rec, state, c, slot, q, Z, d):
 
 
 @njit(cache=True, inline="always")
-def _record_tangent(r, C, d):
-    """C (d, d, d, d) of a side record."""
-    o = _tangent_at(d)
+def _record_tangent(r, C, d, slots):
+    """C (d, d, d, d) of a split side record."""
+    o = _tangent_at(d, slots)
     for i in range(d):
         for a in range(d):
             for j in range(d):
@@ -184,11 +195,11 @@ def _record_impedance(r, slot, Z, d):
 
 
 @njit(cache=True, inline="always")
-def _record_pair(r, slot):
-    """(Z, Z^-1) of a 2D side record along the face direction ``slot``, as the 8-tuple
+def _record_pair(r, slots, slot):
+    """(Z, Z^-1) of a split 2D side record along the face direction ``slot``, as the 8-tuple
     `equations.ctu_parts` takes."""
-    o = _impedance_at(2, slot)
-    return (r[o], r[o + 1], r[o + 2], r[o + 3], r[o + 4], r[o + 5], r[o + 6], r[o + 7])
+    o, oi = _impedance_at(2, slot), _inverse_impedance_at(2, slots, slot)
+    return (r[o], r[o + 1], r[o + 2], r[o + 3], r[oi], r[oi + 1], r[oi + 2], r[oi + 3])
 
 
 def cell_records(dofs, U, Q, rho, cell_material, laws, params, normals, rec, state):
@@ -197,14 +208,16 @@ def cell_records(dofs, U, Q, rho, cell_material, laws, params, normals, rec, sta
     that state, so its tangent and impedances are computed once, not at each of its faces. state
     (n_cells,) int8: 0 the nodes differ (the faces compute their traces' records), 1 recorded,
     2 recorded but an acoustic tensor is not positive definite. dofs (n_cells, nodes per cell);
-    normals (n_cells, slots, d) the cell's face directions."""
+    normals (n_cells, slots, d) the cell's face directions; the records' width says whether
+    they hold the split part (`record_width`)."""
     d, slots = normals.shape[2], normals.shape[1]
-    _cell_records(d, slots, dofs.shape[1])(dofs, U, Q, rho, cell_material, laws, params, normals, rec, state)
+    split = rec.shape[1] == record_width(d, slots, True)
+    _cell_records(d, slots, dofs.shape[1], split)(dofs, U, Q, rho, cell_material, laws, params, normals, rec, state)
 
 
 @kernel_factory
-def _cell_records(d, slots, nodes):
-    nc, width = d * d + d, record_width(d, slots)
+def _cell_records(d, slots, nodes, split):
+    nc, width = d * d + d, record_width(d, slots, split)
 
     def cell_records(dofs, U, Q, rho, cell_material, laws, params, normals, rec, state):
         F, C, u, q = scratch((3, 3)), scratch((d, d, d, d)), scratch((nc,)), scratch((nc,))
@@ -231,7 +244,7 @@ def _cell_records(d, slots, nodes):
                 tangent_call(laws[m], params[m], F, C, d)
             else:
                 tangent_point(laws[m], params[m], F, C, d)
-            state[c] = 1 if _fill_record(q, rho[n0], C, n_c, r, d, slots) else 2
+            state[c] = 1 if _fill_record(q, rho[n0], C, n_c, r, d, slots, split) else 2
             for k in range(width):
                 rec[c, k] = r[k]
     return cell_records
@@ -280,7 +293,7 @@ def _interior_pass(d, slots, recorded):     # literals: the loops unrolled, the 
                         tangent_call(laws[m], params[m], F, C_L, d)
                     else:
                         tangent_point(laws[m], params[m], F, C_L, d)
-                    ok_L = _fill_record(q, rho_f, C_L, normals[c_L], s_L, d, slots)     # a view: rare path
+                    ok_L = _fill_record(q, rho_f, C_L, normals[c_L], s_L, d, slots, ctu)     # a view: rare path
                 else:
                     ok_L = _copy_record(rec, state, c_L, s_L)
                 if state[c_R] == 0:
@@ -290,7 +303,7 @@ def _interior_pass(d, slots, recorded):     # literals: the loops unrolled, the 
                         tangent_call(laws[m], params[m], F, C_R, d)
                     else:
                         tangent_point(laws[m], params[m], F, C_R, d)
-                    ok_R = _fill_record(q, rho_f, C_R, normals[c_R], s_R, d, slots)
+                    ok_R = _fill_record(q, rho_f, C_R, normals[c_R], s_R, d, slots, ctu)
                 else:
                     ok_R = _copy_record(rec, state, c_R, s_R)
                 _record_impedance(s_L, k_L[f] % slots, Z_L, d)
@@ -313,8 +326,8 @@ def _interior_pass(d, slots, recorded):     # literals: the loops unrolled, the 
                     G[f, 0, k], G[f, 1, k] = w_L[k], w_R[k]
             elif d == 2 and ctu:            # fluctuations A- dQ into L, A+ dQ into R, split at once
                 fluctuations(s_L, s_R, n, t_L, t_R, o, w_L, w_R, d)
-                _record_tangent(s_L, C_L, d)
-                _record_tangent(s_R, C_R, d)
+                _record_tangent(s_L, C_L, d, slots)
+                _record_tangent(s_R, C_R, d, slots)
                 _split_into(w_L, C_L, s_L, k_L[f], topo_L, f, G, 0, slots)
                 _split_into(w_R, C_R, s_R, k_R[f], topo_R, f, G, 2, slots)
         return -1
@@ -327,9 +340,9 @@ def _split_into(w, C, r, k, topo, f, G, part, slots):
     side of face f, local face k of the side's cell with record r: its parts for the cell's two
     edges adjacent to the face (local faces k + 1, k + 3) into G[f, part] and G[f, part + 1]."""
     h, normals = topo
-    G_0, G_1 = ctu_parts(w, C, r[_inv_rho_at(2)], -1.0 / (2.0 * h[f]), normals[f, 0, 0], normals[f, 0, 1],
-                         normals[f, 1, 0], normals[f, 1, 1], _record_pair(r, _edge_slot(k, 0, slots)),
-                         _record_pair(r, _edge_slot(k, 1, slots)))
+    G_0, G_1 = ctu_parts(w, C, r[_inv_rho_at(2, slots)], -1.0 / (2.0 * h[f]), normals[f, 0, 0], normals[f, 0, 1],
+                         normals[f, 1, 0], normals[f, 1, 1], _record_pair(r, slots, _edge_slot(k, 0, slots)),
+                         _record_pair(r, slots, _edge_slot(k, 1, slots)))
     for c in range(6):
         G[f, part, c] = G_0[c]
         G[f, part + 1, c] = G_1[c]
@@ -369,12 +382,12 @@ def _cell_corrections(slots):
                     w[k, i] = scale[c, k] * W[s, i] if s >= 0 else 0.0
                 for i in range(2):
                     n[k, i] = signs[c, k] * normals[c, k % slots, i]
-            _record_tangent(r, C, 2)
+            _record_tangent(r, C, 2, slots)
             for e in range(2):                  # edges e, e + 2 <- faces e + 1, e + 3
                 for i in range(6):
                     S[i] = w[e + 1, i] + w[(e + 3) % 4, i]
-                G_a, G_b = ctu_parts(S, C, r[_inv_rho_at(2)], 1.0, n[e, 0], n[e, 1], n[e + 2, 0], n[e + 2, 1],
-                                     _record_pair(r, e % slots), _record_pair(r, (e + 2) % slots))
+                G_a, G_b = ctu_parts(S, C, r[_inv_rho_at(2, slots)], 1.0, n[e, 0], n[e, 1], n[e + 2, 0], n[e + 2, 1],
+                                     _record_pair(r, slots, e % slots), _record_pair(r, slots, (e + 2) % slots))
                 for q in range(2):
                     s = sources[c, e + 2 * q]
                     for i in range(6):
