@@ -12,9 +12,12 @@ from .base import Material, _inverse_transpose, admissible_inverse, cofactor
 def stress_point(F, prm, P, d):
     """d-block P (d, d) of P = mu (F - G) + lam ln(J) G, G = F^-T, at one embedded F (3, 3) (the
     values at F = I where J <= 0); prm = (mu, lam)."""
-    mu, lam = prm[0], prm[1]
     ok, J, G = _inverse_transpose(F)
-    lam_lnJ = lam * np.log(J)
+    _stress(F, ok, G, prm[1] * np.log(J), prm[0], P, d)
+
+
+@njit(cache=True, inline="always")
+def _stress(F, ok, G, lam_lnJ, mu, P, d):
     for i in range(d):
         for a in range(d):
             f = F[i, a] if ok else (1.0 if i == a else 0.0)
@@ -34,15 +37,30 @@ def tangent_point(F, prm, C, d):
     """C_iajb = mu delta_ij delta_ab + c G_ib G_ja + lam G_ia G_jb, c = mu - lam ln J, of one
     embedded F (3, 3) into the d-block C (d, d, d, d); prm = (mu, lam). An embedded F is block
     diagonal (F33 = 1), so is G = F^-T: the d-block of C only involves the d-block of G."""
-    mu, lam = prm[0], prm[1]
     _, J, G = _inverse_transpose(F)
-    c = mu - lam * np.log(J)
+    _tangent(G, np.log(J), prm[0], prm[1], C, d)
+
+
+@njit(cache=True, inline="always")
+def _tangent(G, ln_J, mu, lam, C, d):
+    c = mu - lam * ln_J
     for i in range(d):
         for a in range(d):
             for j in range(d):
                 for b in range(d):
                     C[i, a, j, b] = (mu * ((i == j) * (a == b)) + c * (G[3 * i + b] * G[3 * j + a])
                                      + lam * (G[3 * i + a] * G[3 * j + b]))
+
+
+@njit(cache=True, inline="always")
+def stress_tangent_point(F, prm, P, C, d):
+    """`stress_point` and `tangent_point` at one F, the kinematics (F^-T, ln J) computed once
+    (the same numbers as the two apart)."""
+    mu, lam = prm[0], prm[1]
+    ok, J, G = _inverse_transpose(F)
+    ln_J = np.log(J)
+    _stress(F, ok, G, lam * ln_J, mu, P, d)
+    _tangent(G, ln_J, mu, lam, C, d)
 
 
 def _points(F):

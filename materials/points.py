@@ -86,6 +86,18 @@ def stress_update_point(law, prm, F, h_n, h, P, d):
         stress_point(law, prm, F, P, d)
 
 
+@njit(cache=True, inline="always")
+def stress_tangent_point(law, prm, F, h_n, h, P, C, d):
+    """`stress_update_point` and `tangent_point` at one point (a pass that needs both, the law's
+    with the health check): a law whose stress and tangent share their kinematics computes them
+    once (neo-Hookean: F^-T and ln J)."""
+    if law == NEO_HOOKEAN:
+        neo_hookean.stress_tangent_point(F, prm, P, C, d)
+    else:
+        stress_update_point(law, prm, F, h_n, h, P, d)
+        tangent_point(law, prm, F, C, d)
+
+
 def law_table(materials):
     """(law ids (n_mat,), parameters (n_mat, N_PARAMETERS)) of a sequence of materials."""
     for m in materials:             # a new law must be added to the dispatch, never fall into another's

@@ -5,7 +5,7 @@ from functools import cached_property
 import numpy as np
 from numba import njit
 
-from skdgmpm.materials.points import law_table, stress_update_point, tangent_call, tangent_point
+from skdgmpm.materials.points import law_table, stress_tangent_point, stress_update_point, tangent_call
 
 from .equations import embed as _embed_point
 from .health import Health, health_point, identity_if_not
@@ -34,7 +34,10 @@ def _states(d, assess):                 # literals: the loops unrolled, the heal
                 h_k_n[c] = h_n[k, c]
             _embed_point(u, F, d)
             m = index[k]
-            stress_update_point(laws[m], params[m], F, h_k_n, h_k, P, d)
+            if assess and d > 1:            # the tangent beside the stress (1D: called apart, below)
+                stress_tangent_point(laws[m], params[m], F, h_k_n, h_k, P, C, d)
+            else:
+                stress_update_point(laws[m], params[m], F, h_k_n, h_k, P, d)
             for c in range(n_h):
                 h[k, c] = h_k[c]
             ok = True
@@ -48,11 +51,11 @@ def _states(d, assess):                 # literals: the loops unrolled, the heal
                 for c in range(nc):
                     ok = ok and np.isfinite(u[c])
                 finite[k] = ok
-                identity_if_not(ok, F)
-                if d == 1:
+                if not ok:                  # the health of F = I
+                    identity_if_not(ok, F)
                     tangent_call(laws[m], params[m], F, C, d)
-                else:
-                    tangent_point(laws[m], params[m], F, C, d)
+                elif d == 1:
+                    tangent_call(laws[m], params[m], F, C, d)
                 J[k], lo, speed[k] = health_point(F, C, rho_m[m], d)
                 lowest[k] = lo if ok else np.nan
     return states
