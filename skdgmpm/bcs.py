@@ -48,14 +48,15 @@ def star_state(frame, imposes_velocity, values, t_L, v_L, Z):
     """Solve for (t*, v*) with ``t* - Z v* = t_L - Z v_L`` and, for each frame direction k,
     ``e_k . v* = values[k]`` if ``imposes_velocity[k]`` else ``e_k . t* = values[k]``.
 
-    frame (nf, d, d), imposes_velocity (d,) bool, values (nf, d) or (d,), states (nf, d), Z (nf, d, d).
-    One compiled pass over the faces (a 2d x 2d system each, `equations._solve`).
+    frame (nf, d, d), imposes_velocity (nf, d) or (d,) bool, values (nf, d) or (d,), states
+    (nf, d), Z (nf, d, d). One compiled pass over the faces (a 2d x 2d system each,
+    `equations._solve`).
     """
     nf, d = v_L.shape
     t_s, v_s = np.empty((nf, d)), np.empty((nf, d))
     if nf:
-        _star_states(d)(np.ascontiguousarray(frame, dtype=float),
-                        np.asarray(imposes_velocity, dtype=np.bool_).reshape(d),
+        _star_states(d)(np.ascontiguousarray(np.broadcast_to(frame, (nf, d, d)), dtype=float),
+                        np.ascontiguousarray(np.broadcast_to(imposes_velocity, (nf, d)), dtype=np.bool_),
                         np.ascontiguousarray(np.broadcast_to(values, (nf, d)), dtype=float),
                         t_L, v_L, Z, t_s, v_s)
     return t_s, v_s
@@ -72,8 +73,8 @@ def _star_states(d):                    # a literal d: the 2d x 2d system unroll
                     A[i, j] = 1.0 if i == j else 0.0
                     A[i, d + j] = -Z[f, i, j]
                     zv += Z[f, i, j] * v_L[f, j]
-                    A[d + i, j] = 0.0 if velocity[i] else frame[f, i, j]
-                    A[d + i, d + j] = frame[f, i, j] if velocity[i] else 0.0
+                    A[d + i, j] = 0.0 if velocity[f, i] else frame[f, i, j]
+                    A[d + i, d + j] = frame[f, i, j] if velocity[f, i] else 0.0
                 b[i] = t_L[f, i] - zv
                 b[d + i] = values[f, i]
             _solve(A, b, x, 2 * d)
@@ -84,12 +85,23 @@ def _star_states(d):                    # a literal d: the 2d x 2d system unroll
 
 @dataclass(frozen=True)
 class BoundaryCondition:
-    """Base class: ``star(t, t_L, v_L, Z, N)`` returns the boundary stationary state (t*, v*)."""
+    """Base class: a kind says, in `ghost_rule`, which velocity or traction components it imposes
+    in which frame (its values scaled by the schedule); ``star(t, t_L, v_L, Z, N)`` is then the
+    boundary stationary state (t*, v*) (`star_state`), the same for every kind."""
 
     schedule: Schedule = field(default_factory=Schedule, kw_only=True)
 
-    def star(self, time, t_L, v_L, Z, N):
+    def ghost_rule(self, N):
+        """(frame (nf, d, d), imposes_velocity (d,) bool, values (d,) before the schedule) at
+        faces of outward normals N (nf, d); None: the ghost is the interior (nothing imposed)."""
         raise NotImplementedError
+
+    def star(self, time, t_L, v_L, Z, N):
+        rule = self.ghost_rule(N)
+        if rule is None:
+            return t_L.copy(), v_L.copy()
+        frame, imposes_velocity, values = rule
+        return star_state(frame, imposes_velocity, values * self.schedule(time), t_L, v_L, Z)
 
     def constraints(self, N):
         """Frame (nf, d, d) and which of its velocity / traction components are imposed ((d,)
@@ -105,14 +117,12 @@ class Mixed(BoundaryCondition):
     velocity: dict = field(default_factory=dict)
     traction: dict = field(default_factory=dict)
 
-    def star(self, time, t_L, v_L, Z, N):
+    def ghost_rule(self, N):
         d = N.shape[1]
-        a = self.schedule(time)
         imposes_velocity = np.array([AXES[k] in self.velocity for k in range(d)])
         values = np.array([self.velocity.get(AXES[k], self.traction.get(AXES[k], 0.0))
                            for k in range(d)], dtype=float)
-        values = values * a
-        return star_state(_frame(N, False), imposes_velocity, values, t_L, v_L, Z)
+        return _frame(N, False), imposes_velocity, values
 
     def constraints(self, N):
         d = N.shape[1]
@@ -143,12 +153,11 @@ class NormalVelocity(BoundaryCondition):
 
     value: float = 0.0
 
-    def star(self, time, t_L, v_L, Z, N):
+    def ghost_rule(self, N):
         d = N.shape[1]
-        imposes_velocity = np.array([True] + [False] * (d - 1))
         values = np.zeros(d)
-        values[0] = self.value * self.schedule(time)
-        return star_state(_frame(N, True), imposes_velocity, values, t_L, v_L, Z)
+        values[0] = self.value
+        return _frame(N, True), np.arange(d) == 0, values
 
     def constraints(self, N):
         v = np.arange(N.shape[1]) == 0
@@ -163,12 +172,47 @@ def Symmetry(schedule=Schedule()):
 class Transmissive(BoundaryCondition):
     """Ghost = interior: waves leave without reflection (exact for normal incidence)."""
 
-    def star(self, time, t_L, v_L, Z, N):
-        return t_L.copy(), v_L.copy()
+    def ghost_rule(self, N):
+        return None
 
     def constraints(self, N):
         d = N.shape[1]
         return _frame(N, False), np.zeros(d, bool), np.zeros(d, bool)
+
+
+class BoundaryGhosts:
+    """The stationary states of every boundary face of a grid in one compiled pass
+    (`star_state`), each face under its group's condition: what `BoundaryCondition.star` does
+    group by group, with the frames and imposed components gathered once (a step then computes
+    only the schedules' amplitudes). ``groups``: [(faces mask (nb,), condition)], each face in
+    one group; N (nb, d) the outward normals."""
+
+    def __init__(self, groups, N):
+        nb, d = N.shape
+        self.frame = np.broadcast_to(np.eye(d), (nb, d, d)).copy()
+        self.velocity = np.ones((nb, d), dtype=np.bool_)
+        self.values = np.zeros((nb, d))
+        self.group = np.zeros(nb, dtype=np.int64)
+        self.copy = np.zeros(nb, dtype=np.bool_)
+        self.schedules = []
+        for g, (sel, bc) in enumerate(groups):
+            rule = bc.ghost_rule(N[sel])
+            if rule is None:
+                self.copy[sel] = True
+            else:
+                self.frame[sel], self.velocity[sel], self.values[sel] = rule
+            self.group[sel] = g
+            self.schedules.append(bc.schedule)
+        self.any_copy = bool(self.copy.any())
+
+    def star(self, time, t_L, v_L, Z):
+        """(t*, v*) (nb, d) of every boundary face at ``time``."""
+        amplitude = np.array([schedule(time) for schedule in self.schedules])
+        t_L, v_L, Z = (np.ascontiguousarray(a, dtype=float) for a in (t_L, v_L, Z))
+        t_s, v_s = star_state(self.frame, self.velocity, self.values * amplitude[self.group][:, None], t_L, v_L, Z)
+        if self.any_copy:
+            t_s[self.copy], v_s[self.copy] = t_L[self.copy], v_L[self.copy]
+        return t_s, v_s
 
 
 KINDS = ("velocity", "traction", "free", "symmetry", "normal_velocity", "transmissive", "mixed")

@@ -269,9 +269,7 @@ class DGMPM(GodunovScheme):
                              b.cell_L, self.cell_material, *self.laws, t_L, v_L, Z, C, rho)
         if bad >= 0:
             _not_hyperbolic(bad)
-        t_s, v_s = t_L.copy(), v_L.copy()
-        for sel, bc in self.bc_groups:
-            t_s[sel], v_s[sel] = bc.star(time, t_L[sel], v_L[sel], Z[sel], b.normal[sel])
+        t_s, v_s = self.ghosts.star(time, t_L, v_L, Z)
         flux = np.zeros((nb, system.n_components(d)))
         bad = boundary_pass(b.normal, t_L, v_L, t_s, v_s, C, rho, dt, self.ctu is not None, self.topology["boundary"],
                             self.traces["L"], self.traces["R"], self.interior.measure, flux, weight, R, corr_bnd)

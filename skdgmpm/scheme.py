@@ -14,7 +14,7 @@ import numpy as np
 from numba import njit
 
 from . import parallel, system
-from .bcs import FREE
+from .bcs import FREE, BoundaryGhosts
 from .errors import InputError, InstabilityError
 from .faces import boundary_faces
 from .health import assess
@@ -164,6 +164,7 @@ class GodunovScheme:
         conditions = [FREE] + [bc for _, bc in self.bcs]
         self.bc_groups = [(self.boundary_bc == k, conditions[k + 1]) for k in range(-1, len(self.bcs))]
         self.bc_groups = [(sel, bc) for sel, bc in self.bc_groups if sel.any()]
+        self.ghosts = BoundaryGhosts(self.bc_groups, self.boundary.normal)
 
     def face_values(self, T, grid_state, cells):
         """(Q, F, rho0) on one side of a face set: ((nf, ncomp), (nf, d, d), (nf,))."""
@@ -192,9 +193,7 @@ class GodunovScheme:
         P, v_L = system.split(Q_L, self.d)
         t_L = np.einsum("fia,fa->fi", P, b.normal)
         Z = impedance(C, b.normal, rho)
-        t_s, v_s = t_L.copy(), v_L.copy()
-        for sel, bc in self.bc_groups:
-            t_s[sel], v_s[sel] = bc.star(time, t_L[sel], v_L[sel], Z[sel], b.normal[sel])
+        t_s, v_s = self.ghosts.star(time, t_L, v_L, Z)
         flux = normal_flux(t_s, v_s, b.normal)
         fs = FaceStates(flux, flux - normal_flux(t_L, v_L, b.normal), C, rho)
         power = float(np.sum(b.measure * np.einsum("fi,fi->f", t_s, v_s)))

@@ -76,3 +76,26 @@ def test_release_and_ramp(faces):
 def test_bad_specs(spec, match):
     with pytest.raises(InputError, match=match):
         make_bc(spec, 2, "bc.test")
+
+
+def test_all_boundary_faces_in_one_pass_are_each_groups_star(faces):
+    """`BoundaryGhosts` (every face under its group's condition, one compiled pass) gives, bit for
+    bit, what each condition's own `star` gives on its faces: every kind, a schedule mid-ramp and
+    one released, a transmissive group (its ghost the interior)."""
+    from skdgmpm.bcs import BoundaryGhosts
+
+    specs = [{"kind": "velocity", "value": [3.0, -1.0], "ramp": 2.0},
+             {"kind": "traction", "value": [1e9, 2e8], "release": 0.5},
+             {"kind": "free"}, {"kind": "symmetry"}, {"kind": "normal_velocity", "value": 4.0},
+             {"kind": "transmissive"}, {"kind": "mixed", "velocity": {"x": 1.0}, "traction": {"y": -3e8}}]
+    nf = len(faces["N"])
+    group = np.arange(nf) % len(specs)
+    groups = [(group == k, make_bc(spec, 2)) for k, spec in enumerate(specs)]
+    time = 1.0
+    t_s, v_s = BoundaryGhosts(groups, faces["N"]).star(time, faces["t_L"], faces["v_L"], faces["Z"])
+    for sel, bc in groups:
+        t, v = bc.star(time, faces["t_L"][sel], faces["v_L"][sel], faces["Z"][sel], faces["N"][sel])
+        np.testing.assert_array_equal(t_s[sel], t)
+        np.testing.assert_array_equal(v_s[sel], v)
+    transmissive = group == 5
+    assert np.array_equal(v_s[transmissive], faces["v_L"][transmissive])
