@@ -18,11 +18,13 @@ from .system import DIMENSION, embed
 def _states(d, assess):                 # literals: the loops unrolled, the health computed or not
     dd, nc = d * d, d * d + d
 
-    def states(laws, params, index, U, rho, h_n, h, Q, health):
+    def states(laws, params, index, U, rho, h_n, h, Q, health, motion):
         """Each point's row copied into stack scratch: a row view (U[k], h[k]) handed to the
         inlined law would be reference counted at every point (half the time of the pass). With
         ``assess``, also the point's health (`skdgmpm.health.health_point`) at the law's tangent,
-        into ``health`` = (finite, J, lowest, speed, densities of the materials)."""
+        into ``health`` = (finite, J, lowest, speed, densities of the materials), and its position
+        moved with the material, x + dt (v_old + v) / 2 (trapezoidal), ``motion`` = (x, v_old,
+        dt / 2, new x)."""
         F, P, u, C = scratch((3, 3)), scratch((d, d)), scratch((nc,)), scratch((d, d, d, d))
         n_h = h_n.shape[1]
         h_k_n, h_k = scratch((n_h,)), scratch((n_h,))
@@ -58,6 +60,9 @@ def _states(d, assess):                 # literals: the loops unrolled, the heal
                     tangent_call(laws[m], params[m], F, C, d)
                 J[k], lo, speed[k] = health_point(F, C, rho_m[m], d)
                 lowest[k] = lo if ok else np.nan
+                x, v_old, half_dt, x_new = motion
+                for i in range(x.shape[1]):
+                    x_new[k, i] = x[k, i] + half_dt * (v_old[k, i] + Q[k, dd + i])
     return states
 
 
@@ -116,30 +121,44 @@ class MaterialSet:
         """(Q, history_{n+1}): Q = [P(F, history_n), p / rho0] from states U = [F, p] (n, d*d + d),
         densities rho (n,) and the internal variables of t_n (n, n_history), with their update;
         one compiled pass over the points (no embedded copies, masks or per-law batches)."""
-        return self._update(U, index, rho, history, False)[:2]
+        return self._update(U, index, rho, history, None)
 
-    def update_and_assess(self, U, index, rho, history):
-        """`update` and the new state's `skdgmpm.health.Health` in the same pass over the points
-        (the law's tangent at F beside its stress: F embedded once, the state read once)."""
-        return self._update(U, index, rho, history, True)
+    def update_and_assess(self, U, index, rho, history, motion):
+        """`update`, the new state's `skdgmpm.health.Health` and the points' new positions in the
+        same pass over the points (the law's tangent at F beside its stress: F embedded once, the
+        state read once): (Q, history, Health, x). ``motion`` = (x (n, dim), v_old (n, dim), dt):
+        the positions moved by the trapezoidal rule, x + dt (v_old + v) / 2."""
+        return self._update(U, index, rho, history, motion)
 
-    def _update(self, U, index, rho, history, assess):
+    def _update(self, U, index, rho, history, motion):
         if history is None:
             history = self.initial_history(np.asarray(index)) if self.n_history else np.empty((len(U), 0))
-        n = len(U)
+        n, assess = len(U), motion is not None
         Q, h = np.empty(U.shape), np.empty_like(history)
         health = ((np.empty(n, dtype=np.bool_), np.empty(n), np.empty(n), np.empty(n), self.densities) if assess else
                   (np.empty(0, dtype=np.bool_), np.empty(0), np.empty(0), np.empty(0), self.densities))
+        if assess:
+            x, v_old, dt = motion
+            x_new = np.empty_like(x)
+            moved = (x, v_old, 0.5 * dt, x_new)
+        else:
+            moved = (np.empty((0, 1)), np.empty((0, 1)), 0.0, np.empty((0, 1)))
         d = DIMENSION[U.shape[1]]
         (laws, params), kernel = self.laws, _states(d, assess)
         index, rho = np.asarray(index, dtype=np.int64), np.asarray(rho, dtype=float)
-        rows = (lambda lo, hi: tuple(a[lo:hi] for a in health[:4]) + health[4:]) if assess else (lambda lo, hi: health)
+        if assess:
+            def rows(lo, hi):
+                return (tuple(a[lo:hi] for a in health[:4]) + health[4:],
+                        (moved[0][lo:hi], moved[1][lo:hi], moved[2], moved[3][lo:hi]))
+        else:
+            def rows(lo, hi):
+                return health, moved
         parallel.rows(n, lambda lo, hi: kernel(laws, params, index[lo:hi], U[lo:hi], rho[lo:hi], history[lo:hi],
-                                               h[lo:hi], Q[lo:hi], rows(lo, hi)))
+                                               h[lo:hi], Q[lo:hi], *rows(lo, hi)))
         if not assess:
-            return Q, h, None
+            return Q, h
         finite, J, lowest, speed, _ = health
-        return Q, h, Health(finite, np.where(finite, J, 1.0), lowest, speed)
+        return Q, h, Health(finite, np.where(finite, J, 1.0), lowest, speed), x_new
 
     def state(self, U, index, rho, history=None):
         """Q = [P(F), p / rho0] from states U = [F, p] (n, d*d + d) and densities rho (n,), with

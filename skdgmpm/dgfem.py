@@ -25,7 +25,7 @@ from .faces import interior_faces
 from .kernel_cache import kernel_factory
 from .limiter import SlopeLimiter
 from .particles import Particles
-from .scheme import GodunovScheme, GridState, ParticleState, advance_positions, stage
+from .scheme import GodunovScheme, GridState, ParticleState, stage
 
 INTEGRATORS = ("rk2", "rk4")        # Euler is unstable for DG of degree >= 1
 
@@ -237,11 +237,10 @@ class DGFEM(GodunovScheme):
     def evaluate_points(self, state, dofs, dt):
         """State at the Gauss points from the dofs; positions advanced with the new velocity."""
         U = parallel.matmul(self.B, dofs)
-        Q, history, health = self.materials.update_and_assess(U, self.cell_material[self.gauss.cell], self.gauss.rho0,
-                                                              state.history)
-        v = Q[:, self.d * self.d:]
-        new = ParticleState(state.t + dt, U, Q, advance_positions(state, v, dt, self.d), state.step + 1,
-                            dofs=dofs, history=history)
+        Q, history, health, x = self.materials.update_and_assess(
+            U, self.cell_material[self.gauss.cell], self.gauss.rho0, state.history,
+            (state.x, state.Q[:, self.d * self.d:], dt))
+        new = ParticleState(state.t + dt, U, Q, x, state.step + 1, dofs=dofs, history=history)
         self.check(new, health)
         return new
 

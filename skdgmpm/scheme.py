@@ -64,21 +64,6 @@ class FaceStates:
     rho_R: np.ndarray = None
 
 
-@njit(cache=True, nogil=True)
-def _advance_positions(x, v_old, v_new, half_dt, out):
-    for p in range(len(x)):
-        for k in range(x.shape[1]):
-            out[p, k] = x[p, k] + half_dt * (v_old[p, k] + v_new[p, k])
-
-
-def advance_positions(state, v_new, dt, d):
-    """x + dt (v_old + v_new) / 2: current positions of points that move with the material (one
-    compiled pass: the velocities are strided views of Q)."""
-    out, x, v_old = np.empty_like(state.x), state.x, state.Q[:, d * d:]
-    parallel.rows(len(x), lambda lo, hi: _advance_positions(x[lo:hi], v_old[lo:hi], v_new[lo:hi], 0.5 * dt, out[lo:hi]))
-    return out
-
-
 def cell_values(name, cells, values, n_cells):
     """One value per cell from per-particle values; error if a cell mixes them."""
     out = np.full(n_cells, -1, dtype=values.dtype)
@@ -242,10 +227,9 @@ class GodunovScheme:
         by the trapezoidal rule (second order, so displacement errors measure the scheme, not
         the position update)."""
         d = self.d
-        Q, history, health = self.materials.update_and_assess(U, self.particles.material, self.particles.rho0,
-                                                              state.history)
-        new = ParticleState(state.t + dt, U, Q, advance_positions(state, Q[:, d * d:], dt, d), state.step + 1,
-                            history=history)
+        Q, history, health, x = self.materials.update_and_assess(U, self.particles.material, self.particles.rho0,
+                                                                 state.history, (state.x, state.Q[:, d * d:], dt))
+        new = ParticleState(state.t + dt, U, Q, x, state.step + 1, history=history)
         self.check(new, health)
         return new
 

@@ -77,7 +77,7 @@ def test_a_healthy_run_records_min_j_and_the_smallest_acoustic_eigenvalue():
 
 @pytest.mark.parametrize("d", [1, 2])
 def test_the_law_pass_assesses_the_state_as_the_stand_alone_check_and_numpy_do(d):
-    """`MaterialSet.update_and_assess` (health beside the stress, one pass) gives the same arrays
+    """`MaterialSet.update_and_assess` (health and positions beside the stress, one pass) gives the same arrays
     as `health.assess` on its result, and both the numbers of an independent computation: J = det F,
     numpy's eigenvalues of the symmetrised acoustic tensors C_iajb N_a N_b of the law's batched
     tangent along `directions`, the fastest along the axes; two laws, one point not finite."""
@@ -95,7 +95,9 @@ def test_the_law_pass_assesses_the_state_as_the_stand_alone_check_and_numpy_do(d
     U = system.join(F, rng.standard_normal((n, d)))
     U[7, 0] = np.nan
     rho0 = materials.densities[index]
-    Q, _, fused = materials.update_and_assess(U, index, rho0, None)
+    x, v_old, dt = rng.standard_normal((n, d)), rng.standard_normal((n, d)), 1e-3
+    Q, _, fused, x_new = materials.update_and_assess(U, index, rho0, None, (x, v_old, dt))
+    np.testing.assert_array_equal(x_new, x + 0.5 * dt * (v_old + Q[:, d * d:]))     # trapezoidal, same bits
     alone = assess(materials, SimpleNamespace(material=index), U, Q)
     for name in ("finite", "J", "omega", "speed"):
         np.testing.assert_array_equal(getattr(fused, name), getattr(alone, name), err_msg=name)
