@@ -254,6 +254,7 @@ class GodunovScheme:
         dt_cfl = self.time_step(state)
         dt = min(dt_cfl * (self.dt_trend if self.cfl_guard == "predict" else 1.0), dt_max)
         for _ in range(4):
+            new = None          # a refused attempt's state is not held through the next attempt
             new, work = attempt(dt)
             dt_new = self.time_step(new)
             if dt <= dt_new * (1 + 1e-9):
