@@ -21,7 +21,7 @@ from .scene_keys import ignored_keys
 from .scheme import cell_values
 from .errors import InputError, InstabilityError
 from .grid import Grid, facets_in_box, line, load_mesh, rectangle
-from .heap import retain_freed_memory
+from .heap import release_free_pages, retain_freed_memory
 from .particles import Particles, fill_cells, locate, tensor_layout
 from skdgmpm.materials import make_material
 
@@ -249,6 +249,7 @@ def build(scene):
     except InstabilityError as exc:
         raise InputError(f"{scene.where('initial')}: the initial state is not admissible "
                          f"({str(exc).split(' at step')[0]})") from None
+    release_free_pages()                    # the set-up's freed temporaries: not resident under the step's peak
     return Discretisation(scene, grid, stepper.particles, layout if name == "dgmpm" else None,
                           stepper, initial)
 

@@ -24,3 +24,10 @@ def test_heap_setting_applies_on_build_unless_kept(keep, expected):
     out = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True, env=env)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip().splitlines()[-1] == expected
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc call")
+def test_free_pages_are_released_after_the_set_up():
+    from skdgmpm import heap
+
+    assert heap.release_free_pages()
