@@ -22,6 +22,7 @@ NORMALS = {"left": (-1.0, 0.0), "right": (1.0, 0.0), "bottom": (0.0, -1.0), "top
 
 METHODS = {   # label: scene method table overrides
     "dgmpm": {"name": "dgmpm", "integrator": "euler", "transverse": "dcu", "cfl": 0.5},
+    "dgmpm-ctu": {"name": "dgmpm", "integrator": "euler", "transverse": "ctu", "cfl": 0.5},   # every cell recorded
     "dgmpm-ctu-rk2": {"name": "dgmpm", "integrator": "rk2", "transverse": "ctu", "cfl": 0.5},
     "rk-dgfem-1": {"name": "rk-dgfem", "order": 1, "integrator": "rk2", "cfl": 0.4},
     "rk-dgfem-2": {"name": "rk-dgfem", "order": 2, "integrator": "rk4", "cfl": 0.4},
@@ -103,7 +104,7 @@ def test_linear_velocity_field_is_reproduced_exactly(label):
     assert np.abs(p / RHO - X @ B.T).max() < 1e-10
 
 
-PLANE_WAVE = ("dgmpm", "rk-dgfem-1", "ader-dgfem-1", "ader-dgmpm-1")
+PLANE_WAVE = ("dgmpm", "dgmpm-ctu", "rk-dgfem-1", "ader-dgfem-1", "ader-dgmpm-1")
 
 
 @pytest.mark.parametrize("label", PLANE_WAVE)
