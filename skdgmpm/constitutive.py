@@ -8,7 +8,7 @@ from numba import njit
 from skdgmpm.materials.points import law_table, stress_tangent_point, stress_update_point, tangent_call
 
 from .equations import embed as _embed_point
-from .health import Health, health_point, identity_if_not
+from .health import Health, health_point, identity_if_not, summarise, tally
 from . import parallel
 from .kernel_cache import kernel_factory, scratch
 from .system import DIMENSION, embed
@@ -26,6 +26,7 @@ def _states(d, assess):                 # literals: the loops unrolled, the heal
         moved with the material, x + dt (v_old + v) / 2 (trapezoidal), ``motion`` = (x, v_old,
         dt / 2, new x)."""
         F, P, u, C = scratch((3, 3)), scratch((d, d)), scratch((nc,)), scratch((d, d, d, d))
+        first, J_min, omega_min = -1, np.inf, np.inf
         n_h = h_n.shape[1]
         h_k_n, h_k = scratch((n_h,)), scratch((n_h,))
         finite, J, lowest, speed, rho_m = health
@@ -60,9 +61,11 @@ def _states(d, assess):                 # literals: the loops unrolled, the heal
                     tangent_call(laws[m], params[m], F, C, d)
                 J[k], lo, speed[k] = health_point(F, C, rho_m[m], d)
                 lowest[k] = lo if ok else np.nan
+                first, J_min, omega_min = tally(k, ok, J[k], lowest[k], first, J_min, omega_min)
                 x, v_old, half_dt, x_new = motion
                 for i in range(x.shape[1]):
                     x_new[k, i] = x[k, i] + half_dt * (v_old[k, i] + Q[k, dd + i])
+        return first, J_min, omega_min
     return states
 
 
@@ -153,12 +156,12 @@ class MaterialSet:
         else:
             def rows(lo, hi):
                 return health, moved
-        parallel.rows(n, lambda lo, hi: kernel(laws, params, index[lo:hi], U[lo:hi], rho[lo:hi], history[lo:hi],
-                                               h[lo:hi], Q[lo:hi], *rows(lo, hi)))
+        results = parallel.rows(n, lambda lo, hi: kernel(laws, params, index[lo:hi], U[lo:hi], rho[lo:hi],
+                                                         history[lo:hi], h[lo:hi], Q[lo:hi], *rows(lo, hi)))
         if not assess:
             return Q, h
         finite, J, lowest, speed, _ = health
-        return Q, h, Health(finite, np.where(finite, J, 1.0), lowest, speed), x_new
+        return Q, h, Health(finite, J, lowest, speed, summarise(parallel.chunks(n), results)), x_new
 
     def state(self, U, index, rho, history=None):
         """Q = [P(F), p / rho0] from states U = [F, p] (n, d*d + d) and densities rho (n,), with

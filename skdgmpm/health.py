@@ -43,6 +43,7 @@ class Health:
     J: np.ndarray
     omega: np.ndarray
     speed: np.ndarray
+    summary: tuple = None       # (first bad point or -1, min J, smallest eigenvalue) over the finite points
 
     @property
     def bad(self):
@@ -50,6 +51,8 @@ class Health:
 
     def record(self):
         """The run-history columns: min J and the smallest acoustic eigenvalue over the points."""
+        if self.summary is not None:
+            return {"min_J": self.summary[1], "min_acoustic": self.summary[2]}
         ok = self.finite
         return {"min_J": float(self.J[ok].min()) if ok.any() else np.nan,
                 "min_acoustic": float(self.omega[ok].min()) if ok.any() else np.nan}
@@ -57,10 +60,13 @@ class Health:
     def first_failure(self, state, points, d):
         """(point index, message) for the first bad point: what failed and its value; None if all
         are admissible. Order of the checks: non-finite, then J <= 0, then hyperbolicity."""
-        bad = self.bad
-        if not bad.any():
+        if self.summary is not None:
+            p = self.summary[0]
+        else:
+            bad = self.bad
+            p = int(np.flatnonzero(bad)[0]) if bad.any() else -1
+        if p < 0:
             return None
-        p = int(np.flatnonzero(bad)[0])
         where = (f"at step {state.step}, t = {state.t:.6g} s, particle {p} in cell {int(points.cell[p])} "
                  f"(X = {np.round(points.X[p], 6).tolist()})")
         if not self.finite[p]:
@@ -122,6 +128,29 @@ def _health_3d(F, C, rho):
 
 
 @njit(cache=True, inline="always")
+def tally(k, ok, J, lowest, first, J_min, omega_min):
+    """The running summary of a chunk of points after point k: (first bad point, min J, smallest
+    eigenvalue) over its finite points, as numpy's min gives them (a nan eigenvalue stays)."""
+    if first < 0 and not (ok and J > 0 and lowest > 0):
+        first = k
+    if ok:
+        J_min = J if J < J_min else J_min
+        omega_min = lowest if (lowest < omega_min or lowest != lowest) and omega_min == omega_min else omega_min
+    return first, J_min, omega_min
+
+
+def summarise(chunks, results):
+    """`Health.summary` of a state from its chunks' (first bad, min J, smallest eigenvalue)
+    (`parallel.rows` results, in chunk order): the first bad point of the first chunk that has
+    one; the minima over the chunks (nan where no point is finite)."""
+    first = next((lo + r[0] for (lo, _), r in zip(chunks, results) if r[0] >= 0), -1)
+    J_min = min(r[1] for r in results)
+    omega = [r[2] for r in results]
+    omega_min = np.nan if any(w != w for w in omega) else min(omega)
+    return first, (np.nan if J_min == np.inf else float(J_min)), (np.nan if omega_min == np.inf else float(omega_min))
+
+
+@njit(cache=True, inline="always")
 def identity_if_not(ok, F):
     """F = I where a point's values are not finite (its health is then that of the identity)."""
     if not ok:
@@ -135,8 +164,9 @@ def _assess(d):                         # a literal d: the (d, d) loops unrolled
     def assess(U, Q, material, laws, params, rho, finite, J, lowest, speed):
         """Per point p: finite = all of U and Q finite; J, the smallest acoustic eigenvalue
         (nan where not finite) and the fastest wave along the axes at the law's point tangent
-        (`health_point`; at F = I where not finite)."""
+        (`health_point`; at F = I where not finite: J = 1). Returns the chunk's `tally`."""
         F, C, u = scratch((3, 3)), scratch((d, d, d, d)), scratch((d * d + d,))
+        first, J_min, omega_min = -1, np.inf, np.inf
         for p in range(len(U)):
             ok = True
             for k in range(d * d + d):        # U.shape[1], a literal count
@@ -152,6 +182,8 @@ def _assess(d):                         # a literal d: the (d, d) loops unrolled
                 tangent_point(laws[m], params[m], F, C, d)
             J[p], lo, speed[p] = health_point(F, C, rho[m], d)
             lowest[p] = lo if ok else np.nan
+            first, J_min, omega_min = tally(p, ok, J[p], lowest[p], first, J_min, omega_min)
+        return first, J_min, omega_min
     return assess
 
 
@@ -163,6 +195,6 @@ def assess(materials, points, U, Q):
     laws, params = materials.laws                                        # built once per set
     finite, J, lowest, speed = np.empty(n, dtype=np.bool_), np.empty(n), np.empty(n), np.empty(n)
     material, kernel, rho = np.asarray(points.material, dtype=np.int64), _assess(d), materials.densities
-    parallel.rows(n, lambda lo, hi: kernel(U[lo:hi], Q[lo:hi], material[lo:hi], laws, params, rho,
-                                           finite[lo:hi], J[lo:hi], lowest[lo:hi], speed[lo:hi]))
-    return Health(finite, np.where(finite, J, 1.0), lowest, speed)
+    results = parallel.rows(n, lambda lo, hi: kernel(U[lo:hi], Q[lo:hi], material[lo:hi], laws, params, rho,
+                                                     finite[lo:hi], J[lo:hi], lowest[lo:hi], speed[lo:hi]))
+    return Health(finite, J, lowest, speed, summarise(parallel.chunks(n), results))

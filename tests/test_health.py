@@ -84,7 +84,7 @@ def test_the_law_pass_assesses_the_state_as_the_stand_alone_check_and_numpy_do(d
     from types import SimpleNamespace
     from skdgmpm import system
     from skdgmpm.constitutive import MaterialSet
-    from skdgmpm.health import assess, directions
+    from skdgmpm.health import Health, assess, directions
     from skdgmpm.materials import NeoHookean, SaintVenantKirchhoff
 
     rng = np.random.default_rng(3)
@@ -101,6 +101,10 @@ def test_the_law_pass_assesses_the_state_as_the_stand_alone_check_and_numpy_do(d
     alone = assess(materials, SimpleNamespace(material=index), U, Q)
     for name in ("finite", "J", "omega", "speed"):
         np.testing.assert_array_equal(getattr(fused, name), getattr(alone, name), err_msg=name)
+    # the passes' summaries (first bad point, minima over the finite points) = numpy's of the arrays
+    arrays = Health(fused.finite, fused.J, fused.omega, fused.speed)
+    assert fused.summary == alone.summary
+    assert fused.record() == arrays.record() and fused.summary[0] == int(np.flatnonzero(arrays.bad)[0]) == 7
 
     ok = np.arange(n) != 7
     assert list(fused.finite) == list(ok) and np.isnan(fused.omega[7])
@@ -111,3 +115,29 @@ def test_the_law_pass_assesses_the_state_as_the_stand_alone_check_and_numpy_do(d
     np.testing.assert_allclose(fused.omega[ok], omega[..., 0].min(axis=1), rtol=1e-12, atol=1e-12 * np.abs(omega).max())
     speed = np.sqrt(np.maximum(omega[:, :d, -1].max(axis=1), 0.0) / materials.densities[index[ok]])
     np.testing.assert_allclose(fused.speed[ok], speed, rtol=1e-14)
+
+
+def test_the_chunks_summaries_combine_as_one_pass_over_the_points():
+    """Two threads, so two chunks: the first bad point in the second chunk, the minima over both
+    (`health.summarise`), as numpy's over the whole arrays."""
+    from skdgmpm import parallel, system
+    from skdgmpm.constitutive import MaterialSet
+    from skdgmpm.health import Health
+    from skdgmpm.materials import NeoHookean
+
+    rng = np.random.default_rng(5)
+    n, d = 3 * parallel.MIN_ROWS, 2
+    materials = MaterialSet((NeoHookean(E=200e9, nu=0.3, rho=7800.0),))
+    F = np.eye(d)[None] + 0.1 * rng.standard_normal((n, d, d))
+    F[n - 5] = np.diag([-1.0, 1.0])          # J < 0: the first bad point, in the second chunk
+    U = system.join(F, rng.standard_normal((n, d)))
+    previous = parallel.set_threads(2)
+    try:
+        assert len(parallel.chunks(n)) == 2
+        _, _, health, _ = materials.update_and_assess(U, np.zeros(n, int), np.full(n, 7800.0), None,
+                                                      (np.zeros((n, d)), np.zeros((n, d)), 1.0))
+    finally:
+        parallel.set_threads(previous)
+    arrays = Health(health.finite, health.J, health.omega, health.speed)
+    assert health.summary[0] == int(np.flatnonzero(arrays.bad)[0]) >= n // 2
+    assert health.record() == arrays.record()
