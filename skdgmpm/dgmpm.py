@@ -7,8 +7,10 @@ One step is the list of named stages of R18 §5 (a)-(h):
 
 ``advance`` is forward Euler [R18 eq 20] or Heun's RK2 with both stages on the grid [R18 §7.1]
 (the second stage evaluates the law at the grid nodes). The CTU corrections of R18 §4.4 (2D,
-``transverse="ctu"``) are computed in the same compiled pass over the faces as the Godunov fluxes
-(`skdgmpm.dgmpm_kernels`): each fluctuation is split as soon as it is known, and
+``transverse="ctu"``) come with the Godunov fluxes (`skdgmpm.dgmpm_kernels`): with one particle
+per cell the faces keep their fluctuations and each cell splits the sum of those entering it
+through the two faces next to each of its edges (`cell_corrections`: B+ is linear); otherwise
+each fluctuation is split at its face as soon as it is known and the edges gather the parts.
 ``transverse_flux`` only filters the boundary faces' corrections; DCU leaves them out. ``source`` adds
 int Phi rho0 b = sum_p S_ip V_p rho0 b(X_p, t) when a body force is set (particle quadrature, at
 the time the boundary values are taken).
