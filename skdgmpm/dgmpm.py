@@ -67,7 +67,7 @@ class DGMPM(GodunovScheme):
     stages: tuple = ("project", "time_step", "advance", "interface_flux", "boundary_flux",
                      "transverse_flux", "source", "nodal_state", "back_map", "constitutive_update", "check")
     external_work: float = field(default=0.0, init=False)
-    _kept: tuple = field(default=None, init=False, repr=False)   # (projected state, its interface flux)
+    _kept: tuple = field(default=None, init=False, repr=False)   # (projected state, its faces' terms)
 
     def __post_init__(self):
         if self.integrator not in ("euler", "rk2"):
@@ -258,11 +258,12 @@ class DGMPM(GodunovScheme):
         return flux, np.empty((len(f), 0, nc)), corr_bnd
 
     @stage
-    def boundary_flux(self, grid_state, time, dt, weight, R, corr_bnd):
+    def boundary_flux(self, grid_state, time, corr, corr_bnd):
         """(d) ghost states -> boundary stationary states (t*, v*) and fluxes (nb, nc), with (CTU)
-        the transverse corrections of the fluctuations entering the boundary cells (into R at
-        interior edges, weighted per node by ``weight``, into corr_bnd at boundary edges); returns
-        the fluxes and (t*, v*)."""
+        the transverse corrections per unit Delta t of the fluctuations entering the boundary
+        cells added to the interior faces' ``corr`` and the boundary faces' ``corr_bnd``
+        (`interface_flux`'s): like the interior faces', they depend on Delta t only through that
+        factor (`fixed_terms`). Returns the fluxes and (t*, v*)."""
         b, d = self.boundary, self.d
         nb = len(b)
         t_L, v_L, Z, rho = np.empty((nb, d)), np.empty((nb, d)), np.empty((nb, d, d)), np.empty(nb)
@@ -273,8 +274,8 @@ class DGMPM(GodunovScheme):
             _not_hyperbolic(bad)
         t_s, v_s = self.ghosts.star(time, t_L, v_L, Z)
         flux = np.zeros((nb, system.n_components(d)))
-        bad = boundary_pass(b.normal, t_L, v_L, t_s, v_s, C, rho, dt, self.ctu is not None, self.topology["boundary"],
-                            self.traces["L"], self.traces["R"], self.interior.measure, flux, weight, R, corr_bnd)
+        bad = boundary_pass(b.normal, t_L, v_L, t_s, v_s, C, rho, self.ctu is not None, self.topology["boundary"],
+                            flux, corr, corr_bnd)
         if bad >= 0:
             _not_hyperbolic(bad)
         return flux, t_s, v_s
@@ -358,29 +359,31 @@ class DGMPM(GodunovScheme):
                 np.einsum("fkj,fk->fj", frame, dt_))
         return filt
 
-    def fixed_terms(self, grid_state):
-        """`interface_flux` of a grid state: it depends on Delta t only through the factor of the
-        CTU corrections, so the CFL guard's repeated attempts on the projected state reuse it.
-        (The volume term is computed inside the Euler stage's pass over the nodes.)"""
-        if self._kept is not None and self._kept[0] is grid_state:
-            if self._kept[1] is None:
-                self._kept = (grid_state, self.interface_flux(grid_state))
+    def fixed_terms(self, grid_state, time):
+        """The faces' terms of a grid state at ``time``: `interface_flux` and `boundary_flux`
+        ((flux, corrections, boundary corrections, boundary flux, t*, v*)). They depend on Delta
+        t only through the factor of the CTU corrections, so the CFL guard's repeated attempts on
+        the projected state reuse them. (The volume term is computed inside the Euler stage's
+        pass over the nodes.)"""
+        if self._kept is not None and self._kept[0] is grid_state and self._kept[1] is not None:
             return self._kept[1]
-        return self.interface_flux(grid_state)
+        flux, corr, corr_bnd = self.interface_flux(grid_state)
+        terms = (flux, corr, corr_bnd, *self.boundary_flux(grid_state, time, corr, corr_bnd))
+        if self._kept is not None and self._kept[0] is grid_state:
+            self._kept = (grid_state, terms)
+        return terms
 
-    def add_boundary_terms(self, grid_state, time, dt, corr_bnd, weight, out):
-        """out += weight (-int Phi F_N* over the boundary faces, with the CTU corrections that
-        they send to interior edges, + int Phi S): the Delta t-dependent part of M dU/dt, weighted
-        per node by weight = (step, inv_M): step inv_M[i] (``corr_bnd``: the interior pass's
-        corrections per unit Delta t of the boundary faces' fluxes); returns the power through the
-        boundary (W)."""
+    def add_boundary_terms(self, terms, time, dt, weight, out):
+        """out += weight (-int Phi F_N* over the boundary faces + int Phi S): the Delta
+        t-dependent part of M dU/dt (the boundary faces' fluxes with their CTU corrections for
+        ``dt``), weighted per node by weight = (step, inv_M): step inv_M[i]; ``terms``:
+        `fixed_terms`. Returns the power through the boundary (W)."""
         b = self.boundary
-        corr_bnd = dt * corr_bnd
-        flux, t_s, v_s = self.boundary_flux(grid_state, time, dt, weight, out, corr_bnd)
+        _, _, corr_bnd, flux, t_s, v_s = terms
         if self.ctu is None:
             power = float(np.sum(b.measure * np.einsum("fi,fi->f", t_s, v_s)))
         else:                                               # work of the corrected boundary flux
-            flux = flux + self.transverse_flux(corr_bnd)
+            flux = flux + self.transverse_flux(dt * corr_bnd)
             F, p = system.split(flux, self.d)
             v = -np.einsum("fia,fa->fi", F, b.normal)
             power = float(np.sum(b.measure * np.einsum("fi,fi->f", -p, v)))
@@ -395,14 +398,15 @@ class DGMPM(GodunovScheme):
         ``grid_state`` (boundary values at ``time``, CTU corrections for ``dt``): the volume term
         and the interior faces in one pass over the nodes (`euler_update`), then the boundary
         faces and the source; also returns the boundary power (W)."""
-        flux, corr, corr_bnd = self.fixed_terms(grid_state)
+        terms = self.fixed_terms(grid_state, time)
+        flux, corr = terms[:2]
         weight = (step, self.inv_M)              # step M^-1, node by node
         out = np.empty_like(base) if out is None else out
         csr = parallel.csr_rows
         parallel.rows(len(base), lambda lo, hi: euler_update(
             csr(self.gather_interior, lo, hi), flux, corr, dt, grid_state.Q, csr(self.stiffness, lo, hi), base[lo:hi],
             (step, self.inv_M[lo:hi]), out[lo:hi]))
-        power = self.add_boundary_terms(grid_state, time, dt, corr_bnd, weight, out)
+        power = self.add_boundary_terms(terms, time, dt, weight, out)
         return out, power
 
     @stage

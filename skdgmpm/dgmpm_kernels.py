@@ -449,21 +449,22 @@ def _boundary_sides(d):
     return boundary_sides
 
 
-def boundary_pass(N, t_L, v_L, t_s, v_s, C, rho_f, dt, ctu, topo, T_L, T_R, measure, flux, weight, R, corr_bnd):
+def boundary_pass(N, t_L, v_L, t_s, v_s, C, rho_f, ctu, topo, flux, corr, corr_bnd):
     """Flux F_N(t*, v*) of every boundary face added to flux (nf, nc) (zero on entry) and, with
-    ``ctu``, the transverse corrections of the fluctuation F_N(t*, v*) - F_N(t_L, v_L) entering
-    the cell: an interior edge's integrated at once into R (through the interior traces T_L, T_R
-    and face measures: few faces), weighted per node by ``weight`` ((step, inv_M) as in
-    `_integrate`), a boundary edge's added to corr_bnd. Returns the first face whose acoustic
-    tensor along an edge is not positive definite, or -1."""
-    return _boundary_pass(N.shape[1])(N, t_L, v_L, t_s, v_s, C, rho_f, dt, ctu, topo, T_L, T_R, measure, flux,
-                                      weight, R, corr_bnd)
+    ``ctu``, the transverse corrections per unit Delta t of the fluctuation F_N(t*, v*) -
+    F_N(t_L, v_L) entering the cell: an interior edge's added to the interior faces' corrections
+    ``corr`` (nf, sides, nc) as `interface_flux` keeps them (sides 2: into the row of the side
+    whose cell sends it, sides 1: with the edge's sign; `face_corrections`), a boundary edge's to
+    corr_bnd. Serial (boundary faces next to one edge write the same rows; few faces). Returns
+    the first face whose acoustic tensor along an edge is not positive definite, or -1."""
+    return _boundary_pass(N.shape[1])(N, t_L, v_L, t_s, v_s, C, rho_f, ctu, topo, flux, corr, corr_bnd)
 
 
 @kernel_factory
 def _boundary_pass(d):
-    def boundary_pass(N, t_L, v_L, t_s, v_s, C, rho_f, dt, ctu, topo, T_L, T_R, measure, flux, weight, R, corr_bnd):
+    def boundary_pass(N, t_L, v_L, t_s, v_s, C, rho_f, ctu, topo, flux, corr, corr_bnd):
         w = scratch((d * d + d,))
+        sides = corr.shape[1]
         for f in range(len(N)):
             add_normal_flux(t_s[f], v_s[f], N[f], 1.0, flux[f], d)
             if d == 2 and ctu:              # the fluctuation F_N(t*, v*) - F_N(t_L, v_L) entering the cell
@@ -471,18 +472,20 @@ def _boundary_pass(d):
                     w[k] = flux[f, k]
                 add_normal_flux(t_L[f], v_L[f], N[f], -1.0, w, d)
                 h, normals, edge_int, edge_bnd, sign = topo
-                ok, G_0, G_1 = ctu_split(w, C[f], rho_f[f], -dt / (2.0 * h[f]), normals[0, f, 0], normals[0, f, 1],
+                ok, G_0, G_1 = ctu_split(w, C[f], rho_f[f], -1.0 / (2.0 * h[f]), normals[0, f, 0], normals[0, f, 1],
                                          normals[1, f, 0], normals[1, f, 1])
                 if not ok:
                     return f
-                j = edge_int[0, f]
-                if j >= 0:
-                    _integrate(T_L, j, -sign[0, f] * measure[j], G_0, weight, R)
-                    _integrate(T_R, j, sign[0, f] * measure[j], G_0, weight, R)
-                j = edge_int[1, f]
-                if j >= 0:
-                    _integrate(T_L, j, -sign[1, f] * measure[j], G_1, weight, R)
-                    _integrate(T_R, j, sign[1, f] * measure[j], G_1, weight, R)
+                for e in range(2):
+                    j = edge_int[e, f]
+                    if j >= 0:
+                        s = sign[e, f]
+                        for k in range(6):
+                            g = G_0[k] if e == 0 else G_1[k]
+                            if sides == 2:          # the part the cell sends: its side's row
+                                corr[j, 0 if s > 0 else 1, k] += g
+                            else:
+                                corr[j, 0, k] += s * g
                 _add_boundary_edges(edge_bnd, f, G_0, G_1, corr_bnd)
         return -1
     return boundary_pass
