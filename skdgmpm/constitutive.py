@@ -9,30 +9,38 @@ from skdgmpm.materials.points import law_table, stress_tangent_point, stress_upd
 
 from .equations import embed as _embed_point
 from .health import Health, health_point, identity_if_not, summarise, tally
+from .parallel import row_product
 from . import parallel
 from .kernel_cache import kernel_factory, scratch
 from .system import DIMENSION, embed
 
 
 @kernel_factory
-def _states(d, assess):                 # literals: the loops unrolled, the health computed or not
+def _states(d, assess, gathered):       # literals: the loops unrolled, the health computed or not, U read or gathered
     dd, nc = d * d, d * d + d
 
-    def states(laws, params, index, U, rho, h_n, h, Q, health, motion):
+    def states(laws, params, index, U, rho, h_n, h, Q, health, motion, gather):
         """Each point's row copied into stack scratch: a row view (U[k], h[k]) handed to the
         inlined law would be reference counted at every point (half the time of the pass). With
         ``assess``, also the point's health (`skdgmpm.health.health_point`) at the law's tangent,
         into ``health`` = (finite, J, lowest, speed, densities of the materials), and its position
         moved with the material, x + dt (v_old + v) / 2 (trapezoidal), ``motion`` = (x, v_old,
-        dt / 2, new x)."""
+        dt / 2, new x). With ``gathered``, each point's U is first its row of a sparse product,
+        ``gather`` = (CSR rows of the points, nodal values) (`parallel.row_product`), written into U."""
         F, P, u, C = scratch((3, 3)), scratch((d, d)), scratch((nc,)), scratch((d, d, d, d))
         first, J_min, omega_min = -1, np.inf, np.inf
         n_h = h_n.shape[1]
         h_k_n, h_k = scratch((n_h,)), scratch((n_h,))
         finite, J, lowest, speed, rho_m = health
         for k in range(len(U)):
-            for c in range(nc):
-                u[c] = U[k, c]
+            if gathered:
+                indptr, indices, data, nodal = gather
+                row_product(indptr, indices, data, nodal, k, u, nc)
+                for c in range(nc):
+                    U[k, c] = u[c]
+            else:
+                for c in range(nc):
+                    u[c] = U[k, c]
             for c in range(n_h):
                 h_k_n[c] = h_n[k, c]
             _embed_point(u, F, d)
@@ -126,14 +134,16 @@ class MaterialSet:
         one compiled pass over the points (no embedded copies, masks or per-law batches)."""
         return self._update(U, index, rho, history, None)
 
-    def update_and_assess(self, U, index, rho, history, motion):
+    def update_and_assess(self, U, index, rho, history, motion, gather=None):
         """`update`, the new state's `skdgmpm.health.Health` and the points' new positions in the
         same pass over the points (the law's tangent at F beside its stress: F embedded once, the
         state read once): (Q, history, Health, x). ``motion`` = (x (n, dim), v_old (n, dim), dt):
-        the positions moved by the trapezoidal rule, x + dt (v_old + v) / 2."""
-        return self._update(U, index, rho, history, motion)
+        the positions moved by the trapezoidal rule, x + dt (v_old + v) / 2. ``gather`` = (A CSR,
+        nodal values): the points' states are A @ nodal, computed row by row in the pass and
+        written into U (the same bits as `parallel.matmul`)."""
+        return self._update(U, index, rho, history, motion, gather)
 
-    def _update(self, U, index, rho, history, motion):
+    def _update(self, U, index, rho, history, motion, gather=None):
         if history is None:
             history = self.initial_history(np.asarray(index)) if self.n_history else np.empty((len(U), 0))
         n, assess = len(U), motion is not None
@@ -147,7 +157,11 @@ class MaterialSet:
         else:
             moved = (np.empty((0, 1)), np.empty((0, 1)), 0.0, np.empty((0, 1)))
         d = DIMENSION[U.shape[1]]
-        (laws, params), kernel = self.laws, _states(d, assess)
+        (laws, params), kernel = self.laws, _states(d, assess, gather is not None)
+        if gather is None:
+            A, nodal = (np.zeros(n + 1, np.int32), np.zeros(0, np.int32), np.zeros(0)), np.zeros((0, U.shape[1]))
+        else:
+            A, nodal = parallel.csr(gather[0]), gather[1]
         index, rho = np.asarray(index, dtype=np.int64), np.asarray(rho, dtype=float)
         if assess:
             def rows(lo, hi):
@@ -157,7 +171,8 @@ class MaterialSet:
             def rows(lo, hi):
                 return health, moved
         results = parallel.rows(n, lambda lo, hi: kernel(laws, params, index[lo:hi], U[lo:hi], rho[lo:hi],
-                                                         history[lo:hi], h[lo:hi], Q[lo:hi], *rows(lo, hi)))
+                                                         history[lo:hi], h[lo:hi], Q[lo:hi], *rows(lo, hi),
+                                                         (*parallel.csr_rows(A, lo, hi), nodal)))
         if not assess:
             return Q, h
         finite, J, lowest, speed, _ = health

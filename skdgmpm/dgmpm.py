@@ -3,7 +3,7 @@
 One step is the list of named stages of R18 §5 (a)-(h):
 
     project -> time_step -> interface_flux -> boundary_flux -> transverse_flux -> source
-    -> advance (with the volume term) -> back_map -> constitutive_update
+    -> advance (with the volume term) -> constitutive_update (with the back map)
 
 ``advance`` is forward Euler [R18 eq 20] or Heun's RK2 with both stages on the grid [R18 §7.1]
 (the second stage evaluates the law at the grid nodes). The CTU corrections of R18 §4.4 (2D,
@@ -65,7 +65,7 @@ class DGMPM(GodunovScheme):
     transverse: str = "dcu"
     body_force: object = None
     stages: tuple = ("project", "time_step", "advance", "interface_flux", "boundary_flux",
-                     "transverse_flux", "source", "nodal_state", "back_map", "constitutive_update", "check")
+                     "transverse_flux", "source", "nodal_state", "constitutive_update", "check")
     external_work: float = field(default=0.0, init=False)
     _kept: tuple = field(default=None, init=False, repr=False)   # (projected state, its faces' terms)
 
@@ -430,11 +430,6 @@ class DGMPM(GodunovScheme):
         P = self.materials.stress(F, self.cell_material[self.dof_cell])
         return GridState(U, system.primitive(P, p, self.map.rho))
 
-    @stage
-    def back_map(self, U_nodes):
-        """(g) U_p = sum_i S_ip U_i [R18 eq 40] (PIC)."""
-        return self.map.interpolate(U_nodes)
-
     # ---------------------------------------------------------------- driver-facing
     def step(self, state, dt_max=np.inf):
         shape = (self.n_dofs, state.U.shape[1])     # the step's nodal arrays: work arrays, reused
@@ -442,9 +437,10 @@ class DGMPM(GodunovScheme):
 
         def attempt(dt):
             U_nodes, work = self.advance(grid_state, state.t, dt)
-            U_p = self.back_map(U_nodes)
-            del U_nodes                         # not held through the constitutive update
-            return self.constitutive_update(state, U_p, dt), work
+            # (g) U_p = sum_i S_ip U_i [R18 eq 40] (PIC), each particle's row computed in the
+            # law's pass (h): one pass over the particles, not two
+            U_p = np.empty(state.U.shape)
+            return self.constitutive_update(state, U_p, dt, gather=(self.map.S, U_nodes)), work
 
         try:
             return self.step_with_cfl_guard(state, dt_max, attempt)

@@ -120,6 +120,19 @@ def csr(matrix):
 _NONE = np.zeros(0)             # no scale
 
 
+@njit(cache=True, inline="always")
+def row_product(indptr, indices, data, X, r, u, nc):
+    """u[:nc] = row r of a CSR matrix times X, summed in CSR order from 0 as `matmul` (and
+    scipy's product) sums it: for a pass that needs the product's rows one at a time (the law's
+    pass at the particles reads their states through DGMPM's back map)."""
+    for c in range(nc):
+        u[c] = 0.0
+    for k in range(indptr[r], indptr[r + 1]):
+        j, w = indices[k], data[k]
+        for c in range(nc):
+            u[c] += w * X[j, c]
+
+
 def matmul(A, X, out=None, add=False, scale=None):
     """A diag(scale) X for a CSR matrix A (n, m) (a scipy matrix or a tuple, `csr`) and dense X
     (m, k) or (m,): into ``out`` (n, k) or (n,) if given, added to it if ``add``. Each row is one
