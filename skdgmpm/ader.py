@@ -31,8 +31,6 @@ import scipy.sparse as sp
 from numba import njit
 from numpy.polynomial import legendre
 
-from skdgmpm.materials.points import law_table
-
 from . import parallel, system
 from .ader_kernels import interior_flux_sum, traces
 from .dgfem import DGFEM
@@ -239,10 +237,10 @@ class ADERDGFEM(DGFEM):
         `_face_traces` and ``gauss`` (n_gauss, n_points) to the Gauss points, folded into the volume
         term K_alpha = D_alpha^T gauss (F is linear in Q)."""
         self.traces = tuple((T.indptr, T.indices, T.data) for T in traces)
-        f, b = self.interior, self.boundary
-        self.face_material = tuple(self.cell_material[c] for c in (f.cell_L, f.cell_R, b.cell_L))
-        self.face_rho = tuple(self.rho_cell[c] for c in (f.cell_L, f.cell_R, b.cell_L))
-        self.laws = law_table(self.materials.materials)          # the compiled point laws
+        b = self.boundary
+        mat_L, mat_R, rho_L, rho_R = self.interior_sides[:4]          # DGFEM's, shared
+        self.face_material = (mat_L, mat_R, self.cell_material[b.cell_L])
+        self.face_rho = (rho_L, rho_R, self.rho_cell[b.cell_L])
         self.K = system.Stiffness(tuple((D.T @ gauss).tocsr() for D in self.D))
 
     # ---------------------------------------------------------------- predictor

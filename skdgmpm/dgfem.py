@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 from numba import njit
+from skdgmpm.materials.points import law_table
 from skfem import (CellBasis, ElementDG, ElementLineP1, ElementLineP2, ElementQuad1, ElementQuad2,
                    ElementQuadDG, ElementQuadP)
 
@@ -25,7 +26,8 @@ from .faces import interior_faces
 from .kernel_cache import kernel_factory
 from .limiter import SlopeLimiter
 from .particles import Particles
-from .scheme import GodunovScheme, GridState, ParticleState, stage
+from .riemann import trace_fluxes
+from .scheme import FaceStates, GodunovScheme, GridState, ParticleState, stage
 
 INTEGRATORS = ("rk2", "rk4")        # Euler is unstable for DG of degree >= 1
 
@@ -152,6 +154,10 @@ class DGFEM(GodunovScheme):
         self.interior = interior_faces(g.submesh, element, pointwise=True, intorder=q)
         self.rho_cell = rho_cell
         self._setup_boundary(element)
+        f = self.interior          # each interior row's sides: material, density, the traces as CSR triples
+        self.interior_sides = (self.cell_material[f.cell_L], self.cell_material[f.cell_R], rho_cell[f.cell_L],
+                               rho_cell[f.cell_R], parallel.csr(f.T_L), parallel.csr(f.T_R))
+        self.laws = law_table(self.materials.materials)          # the compiled point laws
         # (P+1)^d Gauss points = (P+1)^d dofs: point values <-> coefficients, cell by cell
         self.point_to_dofs = np.linalg.inv(np.transpose(phi, (1, 2, 0)))                # (nel, nb, nq)
         self.slope_limiter = SlopeLimiter(self, self.limiter)
@@ -189,6 +195,17 @@ class DGFEM(GodunovScheme):
         return Q, U[:, : d * d].reshape(-1, d, d), rho
 
     # ---------------------------------------------------------------- stages
+    @stage
+    def interface_flux(self, grid_state):
+        """(e) Godunov fluxes at the interior facet points: one compiled pass from the dofs
+        (`riemann.trace_fluxes`: traces, law, tangents, Riemann problem), no face array kept; no
+        fluctuations (DGFEM has no transverse correction)."""
+        f = self.interior
+        mat_L, mat_R, rho_L, rho_R, T_L, T_R = self.interior_sides
+        flux = trace_fluxes(T_L, T_R, grid_state.U, grid_state.Q, rho_L, rho_R, f.normal, mat_L, mat_R, *self.laws,
+                            np.empty((len(f), grid_state.U.shape[1])))
+        return FaceStates(flux, None, None, None)
+
     def volume_flux(self, U_dofs):
         """sum_q w_q dPhi/dX_alpha F_alpha(Q(X_q)), the law evaluated at the Gauss points."""
         return self.volume_flux_points(self.gauss_state(U_dofs))

@@ -8,9 +8,12 @@ point functions.
 import numpy as np
 from numba import njit
 
+from skdgmpm.materials.points import stress_point, tangent_call, tangent_point
+
 from . import parallel
 from .equations import add_normal_flux, ctu_split, fluctuations, godunov, impedance as _impedance, riemann
 from .errors import InstabilityError
+from .faces import gather_row
 from .kernel_cache import kernel_factory, scratch
 
 
@@ -66,6 +69,51 @@ def _godunov_fluxes(d):
                 flux[f, k], fluct_L[f, k], fluct_R[f, k] = o[k], w_L[k], w_R[k]
         return -1
     return godunov_fluxes
+
+
+@kernel_factory
+def _trace_fluxes(d, traced):          # traced: 1 if Q is traced (a law with history), 0: the law at the trace
+    dd, nc = d * d, d * d + d
+
+    def trace_fluxes(T_L, T_R, U, Q, rho_L, rho_R, N, mat_L, mat_R, laws, params, flux):
+        """Each side's state is formed in stack scratch as the unfused path formed it (the trace
+        summed in CSR order, embedded F, P from the law, v = p / rho0), never stored."""
+        q_L, q_R, o = scratch((nc,)), scratch((nc,)), scratch((nc,))
+        F_L, F_R, P = scratch((3, 3)), scratch((3, 3)), scratch((d, d))
+        c_L, c_R = scratch((d, d, d, d)), scratch((d, d, d, d))
+        t_L, t_R, t_s, v_s, n = scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,))
+        for f in range(len(N)):
+            for i in range(d):
+                n[i] = N[f, i]
+            gather_row(T_L, f, U, Q, q_L, F_L, d)
+            gather_row(T_R, f, U, Q, q_R, F_R, d)
+            m_L, m_R = mat_L[f], mat_R[f]
+            if not traced:              # q holds the trace of U: [F, p] -> [P(F), p / rho0]
+                stress_point(laws[m_L], params[m_L], F_L, P, d)
+                for i in range(d):
+                    for a in range(d):
+                        q_L[i * d + a] = P[i, a]
+                    q_L[dd + i] = q_L[dd + i] / rho_L[f]
+                stress_point(laws[m_R], params[m_R], F_R, P, d)
+                for i in range(d):
+                    for a in range(d):
+                        q_R[i * d + a] = P[i, a]
+                    q_R[dd + i] = q_R[dd + i] / rho_R[f]
+            if d == 1:                  # the law called, not inlined (`points.tangent_call`)
+                tangent_call(laws[m_L], params[m_L], F_L, c_L, d)
+                tangent_call(laws[m_R], params[m_R], F_R, c_R, d)
+            else:
+                tangent_point(laws[m_L], params[m_L], F_L, c_L, d)
+                tangent_point(laws[m_R], params[m_R], F_R, c_R, d)
+            if not riemann(q_L, c_L, rho_L[f], q_R, c_R, rho_R[f], n, t_L, t_R, t_s, v_s, d):
+                return f
+            for k in range(nc):
+                o[k] = 0.0
+            add_normal_flux(t_s, v_s, n, 1.0, o, d)
+            for k in range(nc):
+                flux[f, k] = o[k]
+        return -1
+    return trace_fluxes
 
 
 @kernel_factory
@@ -154,6 +202,23 @@ def godunov_fluxes(Q_L, C_L, rho_L, Q_R, C_R, rho_R, N):
     if bad >= 0:
         _not_hyperbolic(bad)
     return flux, fluct_L, fluct_R
+
+
+def trace_fluxes(T_L, T_R, U, Q, rho_L, rho_R, N, mat_L, mat_R, laws, params, flux):
+    """Godunov flux F_N(Q*) (nf, nc) into ``flux`` at the rows of the traces T_L, T_R (CSR triples
+    (nf, n_dofs)) of the nodal states U (n_dofs, nc), in one pass over the faces that keeps no
+    face array: each side's Q is the law (mat_L, mat_R (nf,) into the table laws, params) at the
+    trace of U with densities rho_L, rho_R (nf,), or, if Q (n_dofs, nc) is given, its trace (a
+    law with history, which lives at the points only); the tangent at the trace of F. The same
+    numbers as `godunov_fluxes` on the traced face states, bit for bit."""
+    kernel, csr = _trace_fluxes(N.shape[1], int(Q is not None)), parallel.csr_rows
+    Q = U if Q is None else Q
+    bad = parallel.first_bad(len(N), lambda lo, hi: kernel(
+        csr(T_L, lo, hi), csr(T_R, lo, hi), U, Q, rho_L[lo:hi], rho_R[lo:hi], N[lo:hi], mat_L[lo:hi], mat_R[lo:hi],
+        laws, params, flux[lo:hi]))
+    if bad >= 0:
+        _not_hyperbolic(bad)
+    return flux
 
 
 def transverse_positive(w_F, w_p, C, n, rho0):
