@@ -323,7 +323,7 @@ class ADERDGFEM(DGFEM):
         work = self.surface_integral(u_hat, q_hat, time, dt, R)
         if source is not None:
             R += self.source_integral(_time_sum(self.w_tau, source))
-        return self.limit(dofs + dt * self.apply_mass_inverse(R)), work
+        return self.limit(self.mass_update(dofs, dt, R)), work
 
     @stage
     def surface_integral(self, u_hat, q_hat, time, dt, R):

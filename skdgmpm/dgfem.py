@@ -32,36 +32,42 @@ from .scheme import FaceStates, GodunovScheme, GridState, ParticleState, stage
 INTEGRATORS = ("rk2", "rk4")        # Euler is unstable for DG of degree >= 1
 
 
-def _apply_blocks(blocks, cell_dofs, R, out):
+def _apply_blocks(blocks, cell_dofs, R, out, R2=None, base=None, step=1.0):
     """out[dofs of c] = blocks[c] @ R[dofs of c] for every cell c: blocks (nel, nb, nb), cell_dofs
     (nel, nb), R and out (n_dofs, nc) (a compiled loop: numpy's batched matmul on a gathered copy
-    cost ~4 ms a call at 128^2)."""
+    cost ~4 ms a call at 128^2). With ``R2``, R + R2 in place of R, and with ``base``, base + step
+    * (...): an explicit stage's sum and update in the same pass, entry by entry the operations of
+    numpy's ``base + step * (blocks @ (R + R2))``."""
     nb, nc = blocks.shape[1], R.shape[1]
     literal = nc == 6 and nb in (4, 9)      # Q1, Q2 in 2D: literal sizes, the loops unrolled
-    kernel = _apply_blocks_kernel(nb if literal else None, nc if literal else None)
-    parallel.rows(len(blocks), lambda lo, hi: kernel(blocks[lo:hi], cell_dofs[lo:hi], R, out))    # cells lo:hi
+    kernel = _apply_blocks_kernel(nb if literal else None, nc if literal else None, int(R2 is not None),
+                                  int(base is not None))
+    R2, base = (R if R2 is None else R2), (R if base is None else base)
+    parallel.rows(len(blocks), lambda lo, hi: kernel(blocks[lo:hi], cell_dofs[lo:hi], R, R2, base, step, out))
 
 
 @kernel_factory
-def _apply_blocks_kernel(nb, nc):
+def _apply_blocks_kernel(nb, nc, two, update):      # two, update: 0 or 1 (R2 added, base + step * ...)
     if nb is None:                      # sizes read at run time
-        def apply_blocks(blocks, cell_dofs, R, out):
-            _apply_blocks_n(blocks, cell_dofs, R, out, blocks.shape[1], R.shape[1])
+        def apply_blocks(blocks, cell_dofs, R, R2, base, step, out):
+            _apply_blocks_n(blocks, cell_dofs, R, R2, base, step, out, blocks.shape[1], R.shape[1], two, update)
     else:
-        def apply_blocks(blocks, cell_dofs, R, out):
-            _apply_blocks_n(blocks, cell_dofs, R, out, nb, nc)
+        def apply_blocks(blocks, cell_dofs, R, R2, base, step, out):
+            _apply_blocks_n(blocks, cell_dofs, R, R2, base, step, out, nb, nc, two, update)
     return apply_blocks
 
 
 @njit(cache=True, inline="always")
-def _apply_blocks_n(blocks, cell_dofs, R, out, nb, nc):
+def _apply_blocks_n(blocks, cell_dofs, R, R2, base, step, out, nb, nc, two, update):
     for c in range(len(blocks)):
         for k in range(nb):
+            i = cell_dofs[c, k]
             for j in range(nc):
                 s = 0.0
                 for m in range(nb):
-                    s += blocks[c, k, m] * R[cell_dofs[c, m], j]
-                out[cell_dofs[c, k], j] = s
+                    r = cell_dofs[c, m]
+                    s += blocks[c, k, m] * ((R[r, j] + R2[r, j]) if two else R[r, j])
+                out[i, j] = base[i, j] + step * s if update else s
 
 
 def dg_element(d, order):
@@ -169,6 +175,12 @@ class DGFEM(GodunovScheme):
         _apply_blocks(self.mass_inv, self.cell_dofs, R, out)
         return out
 
+    def mass_update(self, base, step, R, R2=None):
+        """base + step M^-1 R (R + R2 if given) in one pass over the cells, without M^-1 R stored."""
+        out = np.empty_like(R)
+        _apply_blocks(self.mass_inv, self.cell_dofs, R, out, R2, base, step)
+        return out
+
     def project(self, U_points):
         """L2 projection of point values onto the DG space (Gauss weights)."""
         return self.apply_mass_inverse(self.source_integral(U_points))
@@ -180,7 +192,8 @@ class DGFEM(GodunovScheme):
     @stage
     def gauss_state(self, U_dofs):
         """Q at the Gauss points from the dofs, with the internal variables of t_n there."""
-        return self.point_state(parallel.matmul(self.B, U_dofs), self.gauss.cell, self.gauss.rho0, self.history_n)
+        return self.materials.state(parallel.matmul(self.B, U_dofs), self.gauss.material, self.gauss.rho0,
+                                    self.history_n)
 
     history_n = None          # (n_gauss, n_history) internal variables of the step's t_n
 
@@ -220,18 +233,21 @@ class DGFEM(GodunovScheme):
         each dof summing its own points (`parallel.matmul` on B^T)."""
         return parallel.matmul(self.B_T, S, scale=self.gauss.volume)
 
-    def rate(self, U_dofs, time, dt):
-        """dU/dt = M^-1 (volume + surface terms + source) and the boundary power."""
+    def rate_update(self, U_dofs, base, step, time, dt):
+        """base + step dU/dt, dU/dt = M^-1 (surface + volume terms + source), and the boundary
+        power: the terms' sum, M^-1 and the update in one pass over the cells (`mass_update`)."""
         if self.materials.n_history:     # the law at the Gauss points only, where the history is
             Q = self.gauss_state(U_dofs)
             R, power = self.surface_residual(GridState(U_dofs, self.project(Q)), time, dt)
-            R += self.volume_flux_points(Q)
+            V = self.volume_flux_points(Q)
         else:
             R, power = self.surface_residual(GridState(U_dofs, None), time, dt)
-            R += self.volume_flux(U_dofs)
-        if self.body_force is not None:
+            V = self.volume_flux(U_dofs)
+        if self.body_force is not None:     # (R + V) + S, in that order
+            R += V
             R += self.source_integral(self.source(self.gauss, time))
-        return self.apply_mass_inverse(R), power
+            V = None
+        return self.mass_update(base, step, R, V), power
 
     @stage
     def limit(self, dofs):
@@ -245,8 +261,8 @@ class DGFEM(GodunovScheme):
         """TVD-RK2 (Heun) or classical RK4 (`skdgmpm.integrators`), limiting every stage's result;
         returns dofs and boundary work."""
         def rk_stage(U_eval, base, t, step):
-            k, power = self.rate(U_eval, t, dt)
-            return self.limit(base + step * k), power
+            U_next, power = self.rate_update(U_eval, base, step, t, dt)
+            return self.limit(U_next), power
 
         return integrators.INTEGRATORS[self.integrator](rk_stage, U, time, dt)
 
@@ -255,8 +271,7 @@ class DGFEM(GodunovScheme):
         """State at the Gauss points from the dofs; positions advanced with the new velocity."""
         U = parallel.matmul(self.B, dofs)
         Q, history, health, x = self.materials.update_and_assess(
-            U, self.cell_material[self.gauss.cell], self.gauss.rho0, state.history,
-            (state.x, state.Q[:, self.d * self.d:], dt))
+            U, self.gauss.material, self.gauss.rho0, state.history, (state.x, state.Q[:, self.d * self.d:], dt))
         new = ParticleState(state.t + dt, U, Q, x, state.step + 1, dofs=dofs, history=history)
         self.check(new, health)
         return new
