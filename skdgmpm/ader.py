@@ -133,10 +133,19 @@ def _picard_update_nc(U0, T, div, dt, scale, u_hat, new, nc, n_r, lo, hi):
     return change
 
 
-@njit(cache=True)
 def _block_scale(U, dd):
     """Per component of the state (n, nc): the largest |U| of its block (F: the first dd
-    components, p: the others), 1 where that is 0, nan if any is nan (one pass, no temporaries)."""
+    components, p: the others), 1 where that is 0, nan if any is nan; the largest of the row
+    chunks' (exact, in any order)."""
+    big = np.array(parallel.rows(len(U), lambda lo, hi: _block_max(U[lo:hi], dd)))       # (chunks, 2)
+    big = np.where(np.isnan(big).any(axis=0), np.nan, big.max(axis=0))
+    big = np.where(big != 0.0, big, 1.0)
+    return np.where(np.arange(U.shape[1]) < dd, big[0], big[1])
+
+
+@njit(cache=True, nogil=True)
+def _block_max(U, dd):
+    """The largest |U| of the F block and of the p block of rows U, nan once one is nan."""
     big = np.zeros(2)
     for p in range(len(U)):
         for c in range(U.shape[1]):
@@ -144,19 +153,25 @@ def _block_scale(U, dd):
             k = 0 if c < dd else 1
             if x > big[k] or x != x:
                 big[k] = x
-    scale = np.empty(U.shape[1])
-    for c in range(U.shape[1]):
-        x = big[0] if c < dd else big[1]
-        scale[c] = x if x != 0.0 else 1.0
-    return scale
+    return big
 
 
 def _time_sum(w, a):
-    """sum_s w[s] a[s] over the time nodes (the leading axis)."""
-    out = w[0] * a[0]
-    for s in range(1, len(w)):
-        out += w[s] * a[s]
+    """sum_s w[s] a[s] over the time nodes (the leading axis): w[0] a[0] + w[1] a[1] + ..., in
+    that order, entry by entry (one compiled pass on the threads)."""
+    out = np.empty(a.shape[1:])
+    flat, o, w = a.reshape(len(a), -1), out.reshape(-1), np.asarray(w, dtype=float)
+    parallel.rows(len(o), lambda lo, hi: _time_sum_kernel(w, flat[:, lo:hi], o[lo:hi]))
     return out
+
+
+@njit(cache=True, nogil=True)
+def _time_sum_kernel(w, a, out):
+    for i in range(a.shape[1]):
+        x = w[0] * a[0, i]
+        for s in range(1, len(w)):
+            x += w[s] * a[s, i]
+        out[i] = x
 
 
 def time_matrices(order):
@@ -286,7 +301,9 @@ class ADERDGFEM(DGFEM):
         U = np.ascontiguousarray(U)
         d, n_t = self.d, len(self.tau)
         scale = _block_scale(U.reshape(-1, U.shape[-1]), d * d)     # change measured per block (F, p)
-        u_hat, new = np.empty((2, n_t) + U.shape)   # two buffers, swapped every iteration
+        # two buffers, swapped every iteration; two allocations, not one of twice the size: past
+        # glibc's mmap threshold (32 MiB, 256^2 P1) each step mapped it afresh and faulted it in
+        u_hat, new = np.empty((n_t,) + U.shape), np.empty((n_t,) + U.shape)
         div = np.empty((n_t,) + U.shape)
         flat = lambda a: a.reshape(len(a), -1)      # noqa: E731 (views: (S, n_points nc))
         if self.picard_guess == "taylor":           # L23 eq 64: u_hat[s] = U - dt tau_s DIV F(Q(U))

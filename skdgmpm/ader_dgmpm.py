@@ -55,6 +55,8 @@ class ADERDGMPM(ADERDGFEM):
         self.mask = np.zeros(nel * self.n_max)
         self.mask[self.slot] = 1.0
         self.padding = np.flatnonzero(self.mask == 0)
+        self.slot_particle = np.full(nel * self.n_max, -1, dtype=np.int32)      # -1: padding
+        self.slot_particle[self.slot] = np.arange(len(p))
         self.slot_cell = np.repeat(np.arange(nel), self.n_max)                   # cell and density of
         self.slot_rho0 = np.ones(nel * self.n_max)                              # each padded slot
         self.slot_rho0[self.slot] = p.rho0
@@ -117,9 +119,10 @@ class ADERDGMPM(ADERDGFEM):
 
     # ---------------------------------------------------------------- predictor at particles
     def _padded(self, values):
-        out = np.zeros((len(self.mask),) + values.shape[1:])
-        out[self.slot] = values
-        return out.reshape((self.basis.dx.shape[0], self.n_max) + values.shape[1:])
+        """Particle values (n, ...) on the padded slots (nel, n_max, ...), zero in the padding (a
+        gather on the threads)."""
+        out = np.empty((self.basis.dx.shape[0], self.n_max) + values.shape[1:])
+        return parallel.take_rows(np.ascontiguousarray(values), self.slot_particle, out)
 
     @stage
     def predictor(self, U_slots, dt, source=None, Q_slots=None):

@@ -106,6 +106,23 @@ def first_bad(n, call):
     return -1
 
 
+def take_rows(X, index, out):
+    """out[r] = X[index[r]], zero where index[r] < 0, for X (m, ...) and ``out`` holding len(index)
+    such rows (C order, any leading shape), in parallel chunks: a gather (e.g. particles into
+    padded slots), copies only."""
+    X2, out2 = X.reshape(len(X), -1), out.reshape(len(index), -1)
+    rows(len(index), lambda lo, hi: _take_rows(X2, index[lo:hi], out2[lo:hi]))
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _take_rows(X, index, out):
+    for r in range(len(index)):
+        j = index[r]
+        for c in range(out.shape[1]):
+            out[r, c] = X[j, c] if j >= 0 else 0.0
+
+
 def csr_rows(matrix, lo, hi):
     """Rows lo:hi of a CSR triple (indptr, indices, data) (the offsets stay absolute)."""
     indptr, indices, data = matrix
