@@ -140,12 +140,13 @@ def _axis_gimp(s, lp, n, k, nodes, w, dw):
 
 
 @kernel_factory
-def _weights(d, m):                     # literal d and nodes per axis (2: hat, 3: GIMP)
-    def weights(x, lp, origin, shape, h, lattice, cols, S, G):
-        """Per particle p at x[p] with half-lengths lp[p] (m): the m^d columns and values of row p
-        of S and of each dS/dx_k (G[k]), the tensor product of the axes' weights in lattice order
-        (the last axis fastest). Returns the first particle outside the grid (or not finite), or
-        -1."""
+def _weights(d, m, stretched):          # literal d, nodes per axis (2: hat, 3: GIMP), stretched: 0 or 1
+    def weights(x, lp, F, origin, shape, h, lattice, cols, S, G):
+        """Per particle p at x[p] with half-lengths lp[p] (m) (stretched: lp[p] l0 and F[p] the
+        deformation gradient, the lengths of `half_lengths` formed here): the m^d columns and values
+        of row p of S and of each dS/dx_k (G[k]), the tensor product of the axes' weights in lattice
+        order (the last axis fastest). Returns the first particle outside the grid (or not finite),
+        or -1."""
         nodes = np.empty((d, m), np.int64)
         w, dw = np.empty((d, m)), np.empty((d, m))
         for p in range(len(x)):
@@ -156,6 +157,11 @@ def _weights(d, m):                     # literal d and nodes per axis (2: hat, 
                 s = min(max(s, 0.0), shape[k] - 1.0)
                 if m == 2:
                     _axis_hat(s, shape[k], k, nodes, w, dw)
+                elif stretched:         # np.clip(l0 F_kk, 0, h/2) as numpy clips (a nan stays nan)
+                    l, top = lp[p, k] * F[p, k, k], 0.5 * h[k]
+                    l = l if (l != l or l > 0.0) else 0.0
+                    l = l if (l != l or l < top) else top
+                    _axis_gimp(s, l / h[k], shape[k], k, nodes, w, dw)
                 else:
                     _axis_gimp(s, lp[p, k] / h[k], shape[k], k, nodes, w, dw)
                 for j in range(m):
@@ -212,11 +218,14 @@ class ShapeFunctions:
 
 
 _NO_LENGTHS = np.zeros((0, 0))
+_NO_STRETCH = np.zeros((0, 0, 0))
 
 
-def shape_functions(lattice, x, kind, lp=None, step=None, time=None, reuse=None):
+def shape_functions(lattice, x, kind, lp=None, step=None, time=None, reuse=None, F=None):
     """S_ip and grad S_ip at current positions ``x`` (n, d) with half-lengths ``lp`` (n, d), in
-    one compiled pass over the particles (in parallel chunks). ``reuse``: shape functions no
+    one compiled pass over the particles (in parallel chunks). With ``F`` (n, d, d) (cpGIMP), lp
+    is l0 and the pass takes the half-lengths of `half_lengths` (no serial numpy before it, the
+    same bits). ``reuse``: shape functions no
     longer needed (the last step's), whose arrays are overwritten rather than new ones taken
     (~80 MB at 256^2: fresh pages cost a page fault each, and the faults of two threads queue).
 
@@ -229,8 +238,9 @@ def shape_functions(lattice, x, kind, lp=None, step=None, time=None, reuse=None)
         cols, W = reuse.cols.reshape(n, m ** d), reuse.values.reshape(1 + d, n, m ** d)
     else:
         cols, W = np.empty((n, m ** d), np.int64), np.empty((1 + d, n, m ** d))   # W: S, then grad
-    kernel, shape = _weights(d, m), np.array(lattice.shape, dtype=np.int64)
-    bad = parallel.first_bad(n, lambda lo, hi: kernel(x[lo:hi], lp[lo:hi], lattice.origin, shape, lattice.h,
+    kernel, shape = _weights(d, m, int(F is not None)), np.array(lattice.shape, dtype=np.int64)
+    F = _NO_STRETCH if F is None else F
+    bad = parallel.first_bad(n, lambda lo, hi: kernel(x[lo:hi], lp[lo:hi], F[lo:hi], lattice.origin, shape, lattice.h,
                                                       lattice.node, cols[lo:hi], W[0, lo:hi], W[1:, lo:hi]))
     if bad >= 0:
         when = "" if step is None else f" at step {step}, t = {time:.6g} s"

@@ -23,6 +23,7 @@ checks, energy, outputs and run driver are shared.
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from . import parallel, system
 from .bcs import Mixed, NormalVelocity, Transmissive
@@ -224,9 +225,10 @@ class MPM(GodunovScheme):
     @stage
     def shape_functions(self, s):
         """S_ip, grad S_ip at the current positions (cpGIMP: l_p from the current F)."""
-        lp = half_lengths(self.shape, self.l0, s.F, self.lattice.h)
+        cp = self.shape == "cpgimp"         # the half-lengths l0 F_ii formed in the pass
+        lp = self.l0 if cp else half_lengths(self.shape, self.l0)
         s.shape = shape_functions(self.lattice, s.x, self.shape, lp, step=s.step + 1, time=s.t,
-                                  reuse=self.__dict__.pop("_last_shape", None))
+                                  reuse=self.__dict__.pop("_last_shape", None), F=s.F if cp else None)
         self._last_shape = s.shape              # overwritten by the next step's
 
     @stage
@@ -324,9 +326,9 @@ class MPM(GodunovScheme):
     @stage
     def particle_update(self, s):
         """v_p += dt sum_i S_ip a_i (FLIP), x_p += dt sum_i S_ip v_i* (not in a linearised geometry)."""
-        s.v = s.v + s.dt * parallel.matmul(s.shape.matrix(0), s.a)
+        s.v = parallel.add_scaled(s.v, s.dt, parallel.matmul(s.shape.matrix(0), s.a))
         if self.geometry == "updated":
-            s.x = s.x + s.dt * parallel.matmul(s.shape.matrix(0), s.v_grid)
+            s.x = parallel.add_scaled(s.x, s.dt, parallel.matmul(s.shape.matrix(0), s.v_grid))
 
     @stage
     def reproject(self, s):
@@ -335,8 +337,10 @@ class MPM(GodunovScheme):
 
     @staticmethod
     def _per_mass(s, nodal):
-        """nodal / m_i on nodes with mass, zero elsewhere."""
-        return np.where(s.filled[:, None], nodal / np.where(s.filled, s.mass, 1.0)[:, None], 0.0)
+        """nodal / m_i on nodes with mass, zero elsewhere (a pass on the threads)."""
+        out = np.empty(nodal.shape)
+        parallel.rows(len(out), lambda lo, hi: _per_mass(nodal[lo:hi], s.mass[lo:hi], s.filled[lo:hi], out[lo:hi]))
+        return out
 
     # ---------------------------------------------------------------- driver-facing
     @stage
@@ -372,6 +376,13 @@ class MPM(GodunovScheme):
         self.check(new)
         self.external_work += s.work + s.work_constraints
         return new
+
+
+@njit(cache=True, nogil=True)
+def _per_mass(nodal, mass, filled, out):
+    for i in range(len(out)):
+        for k in range(out.shape[1]):
+            out[i, k] = nodal[i, k] / mass[i] if filled[i] else 0.0
 
 
 # ---------------------------------------------------------------- per-particle passes (literal d)

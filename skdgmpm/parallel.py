@@ -106,6 +106,23 @@ def first_bad(n, call):
     return -1
 
 
+def add_scaled(x, a, y):
+    """x + a * y for arrays of one shape (n, ...) and a scalar a, rows in parallel chunks: entry
+    by entry numpy's operations (a * y, then the sum), the same bits; x and y may be strided
+    views (a column block of a state array)."""
+    out = np.empty(x.shape)
+    x2, y2, out2 = x.reshape(len(x), -1), y.reshape(len(y), -1), out.reshape(len(out), -1)
+    rows(len(out), lambda lo, hi: _add_scaled(x2[lo:hi], float(a), y2[lo:hi], out2[lo:hi]))
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _add_scaled(x, a, y, out):
+    for r in range(len(out)):
+        for c in range(out.shape[1]):
+            out[r, c] = x[r, c] + a * y[r, c]
+
+
 def take_rows(X, index, out):
     """out[r] = X[index[r]], zero where index[r] < 0, for X (m, ...) and ``out`` holding len(index)
     such rows (C order, any leading shape), in parallel chunks: a gather (e.g. particles into
