@@ -105,9 +105,14 @@ class BoundaryCondition:
 
     def constraints(self, N):
         """Frame (nf, d, d) and which of its velocity / traction components are imposed ((d,)
-        bools each); corrections of the boundary flux may only change the free ones."""
-        d = N.shape[1]
-        return np.broadcast_to(np.eye(d), (len(N), d, d)), np.zeros(d, bool), np.ones(d, bool)
+        bools each), read from `ghost_rule`; corrections of the boundary flux may only change the
+        free ones."""
+        rule = self.ghost_rule(N)
+        if rule is None:                    # nothing imposed
+            d = N.shape[1]
+            return _frame(N, False), np.zeros(d, bool), np.zeros(d, bool)
+        frame, imposes_velocity, _ = rule
+        return frame, imposes_velocity, ~imposes_velocity
 
 
 @dataclass(frozen=True)
@@ -123,11 +128,6 @@ class Mixed(BoundaryCondition):
         values = np.array([self.velocity.get(AXES[k], self.traction.get(AXES[k], 0.0))
                            for k in range(d)], dtype=float)
         return _frame(N, False), imposes_velocity, values
-
-    def constraints(self, N):
-        d = N.shape[1]
-        v = np.array([AXES[k] in self.velocity for k in range(d)])
-        return _frame(N, False), v, ~v
 
 
 FREE = Mixed()
@@ -159,10 +159,6 @@ class NormalVelocity(BoundaryCondition):
         values[0] = self.value
         return _frame(N, True), np.arange(d) == 0, values
 
-    def constraints(self, N):
-        v = np.arange(N.shape[1]) == 0
-        return _frame(N, True), v, ~v
-
 
 def Symmetry(schedule=Schedule()):
     return NormalVelocity(0.0, schedule=schedule)
@@ -174,10 +170,6 @@ class Transmissive(BoundaryCondition):
 
     def ghost_rule(self, N):
         return None
-
-    def constraints(self, N):
-        d = N.shape[1]
-        return _frame(N, False), np.zeros(d, bool), np.zeros(d, bool)
 
 
 class BoundaryGhosts:

@@ -62,10 +62,8 @@ def _states(d, assess, gathered):       # literals: the loops unrolled, the heal
                 for c in range(nc):
                     ok = ok and np.isfinite(u[c])
                 finite[k] = ok
-                if not ok:                  # the health of F = I
+                if not ok or d == 1:        # not finite: the health of F = I; 1D: the tangent called apart
                     identity_if_not(ok, F)
-                    tangent_call(laws[m], params[m], F, C, d)
-                elif d == 1:
                     tangent_call(laws[m], params[m], F, C, d)
                 J[k], lo, speed[k] = health_point(F, C, rho_m[m], d)
                 lowest[k] = lo if ok else np.nan
