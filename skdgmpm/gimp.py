@@ -216,6 +216,79 @@ class ShapeFunctions:
         """(dS/dx_k)^T X."""
         return parallel.matmul_T(self.pattern_T, self.values[1 + k], X)
 
+    def mass_momentum(self, m, v):
+        """(S^T m, S^T diag(m) v) in one pass over the pattern: the bits of S_T(m) and S_T(v,
+        scale=m)."""
+        d = v.shape[1]
+        mass, momentum = np.empty(self.n_nodes), np.empty((self.n_nodes, d))
+        kernel = _mass_momentum(d)
+        self._over_nodes(lambda k, lo, hi, first, last: kernel(self.indptr, self.cols, self.values, m, v, first, last,
+                                                               lo, hi, mass, momentum))
+        return mass, momentum
+
+    def grad_T_sum(self, X):
+        """sum(grad_T(k, X[:, :, k]) for k in range(d)) (Python's sum, from 0) for X (n, d, d), in
+        one pass over the pattern (the same bits)."""
+        d = X.shape[1]
+        out = np.empty((self.n_nodes, d))
+        kernel = _grad_T_sum(d)
+        self._over_nodes(lambda k, lo, hi, first, last: kernel(self.indptr, self.cols, self.values, X, first, last,
+                                                               lo, hi, out))
+        return out
+
+    def _over_nodes(self, call):
+        """call(k, lo, hi, first, last) for the chunks of nodes lo:hi of the transposed pattern (the
+        particles first:last reach them), in parallel (`parallel.matmul_T`'s split)."""
+        A = self.pattern_T
+        if len(A.chunks) != len(parallel.chunks(A.n_cols)):
+            raise ValueError("the thread count changed since the pattern was made")
+        k_of = {lo: k for k, (lo, _) in enumerate(A.chunks)}
+        parallel.rows(A.n_cols, lambda lo, hi: call(k_of[lo], lo, hi, A.first[k_of[lo]], A.last[k_of[lo]]))
+
+
+@kernel_factory
+def _mass_momentum(d):
+    def mass_momentum(indptr, cols, values, m, v, first, last, lo, hi, mass, momentum):
+        """Nodes lo:hi: mass[j] += S m_p, momentum[j] += S (m_p v_p) over the particles first:last
+        in their order (`parallel.matmul_T`'s sums)."""
+        for j in range(lo, hi):
+            mass[j] = 0.0
+            for c in range(d):
+                momentum[j, c] = 0.0
+        for r in range(first, last):
+            s = m[r]
+            for k in range(indptr[r], indptr[r + 1]):
+                j = cols[k]
+                if j >= lo and j < hi:
+                    w = values[0, k]
+                    mass[j] += w * m[r]
+                    for c in range(d):
+                        momentum[j, c] += w * (s * v[r, c])
+    return mass_momentum
+
+
+@kernel_factory
+def _grad_T_sum(d):
+    def grad_T_sum(indptr, cols, values, X, first, last, lo, hi, out):
+        """Nodes lo:hi: each axis' sum (dS/dx_a)^T X[:, :, a] kept apart over the particles
+        first:last in their order, then added from 0 in the order of the axes."""
+        part = np.zeros((d, hi - lo, d))
+        for r in range(first, last):
+            for k in range(indptr[r], indptr[r + 1]):
+                j = cols[k]
+                if j >= lo and j < hi:
+                    for a in range(d):
+                        w = values[1 + a, k]
+                        for c in range(d):
+                            part[a, j - lo, c] += w * X[r, c, a]
+        for j in range(hi - lo):
+            for c in range(d):
+                x = 0.0
+                for a in range(d):
+                    x = x + part[a, j, c]
+                out[lo + j, c] = x
+    return grad_T_sum
+
 
 _NO_LENGTHS = np.zeros((0, 0))
 _NO_STRETCH = np.zeros((0, 0, 0))

@@ -29,7 +29,7 @@ from . import parallel, system
 from .bcs import Mixed, NormalVelocity, Transmissive
 from .errors import InputError
 from .gimp import SHAPES, Lattice, half_lengths, shape_functions
-from .kernel_cache import kernel_factory
+from .kernel_cache import kernel_factory, scratch
 from .scheme import GodunovScheme, ParticleState, stage
 
 
@@ -235,11 +235,11 @@ class MPM(GodunovScheme):
     def project(self, s):
         """m_i = sum_p S_ip m_p, v_i = sum_p S_ip m_p v_p / m_i (zero on empty nodes)."""
         m = self.particles.mass
-        s.mass = s.shape.S_T(m)
+        s.mass, momentum = s.shape.mass_momentum(m, s.v)
         # every node with mass takes part: grad S ~ sqrt(S) near the edge of a GIMP support, so
         # dropping nodes of small mass drops finite forces (and momentum conservation)
         s.filled = s.mass > 0
-        s.v_grid = self._per_mass(s, s.shape.S_T(s.v, scale=m))
+        s.v_grid = self._per_mass(s, momentum)
 
     @stage
     def impose_velocity(self, s):
@@ -281,11 +281,12 @@ class MPM(GodunovScheme):
 
     @staticmethod
     def _gradient(s, v_grid):
-        """L_p = sum_i v_i (x) grad S_ip (n, d, d): column a from the gradient's row gather."""
+        """L_p = sum_i v_i (x) grad S_ip (n, d, d): one pass over the particles' rows, each entry
+        summed in CSR order as `parallel.matmul` sums column a of L (the same bits)."""
         d = s.v.shape[1]
         L = np.empty((len(s.x), d, d))
-        for a in range(d):
-            parallel.matmul(s.shape.matrix(1 + a), v_grid, out=L[:, :, a])
+        sf, kernel = s.shape, _gradient(d)
+        parallel.rows(len(L), lambda lo, hi: kernel(sf.indptr[lo:hi + 1], sf.cols, sf.values, v_grid, L[lo:hi]))
         return L
 
     @stage
@@ -296,7 +297,7 @@ class MPM(GodunovScheme):
         kernel = _kirchhoff(self.d)
         parallel.rows(len(tau), lambda lo, hi: kernel(s.P[lo:hi], s.F[lo:hi], self.particles.volume[lo:hi],
                                                       tau[lo:hi]))
-        s.force = -sum(s.shape.grad_T(k, tau[:, :, k]) for k in range(self.d))
+        s.force = -s.shape.grad_T_sum(tau)
         if self.body_force is None and not self.tractions:
             s.external = np.zeros_like(s.force)
         else:
@@ -326,9 +327,13 @@ class MPM(GodunovScheme):
     @stage
     def particle_update(self, s):
         """v_p += dt sum_i S_ip a_i (FLIP), x_p += dt sum_i S_ip v_i* (not in a linearised geometry)."""
-        s.v = parallel.add_scaled(s.v, s.dt, parallel.matmul(s.shape.matrix(0), s.a))
-        if self.geometry == "updated":
-            s.x = parallel.add_scaled(s.x, s.dt, parallel.matmul(s.shape.matrix(0), s.v_grid))
+        sf, v, x, moving = s.shape, np.empty(s.v.shape), s.x, self.geometry == "updated"
+        if moving:
+            x = np.empty(s.x.shape)
+        kernel = _particle_update(self.d, int(moving))    # both sums in one pass (matmul's bits, then + dt *)
+        parallel.rows(len(v), lambda lo, hi: kernel(sf.indptr[lo:hi + 1], sf.cols, sf.values, s.a, s.v_grid, s.dt,
+                                                     s.v[lo:hi], s.x[lo:hi], v[lo:hi], x[lo:hi]))
+        s.v, s.x = v, x
 
     @stage
     def reproject(self, s):
@@ -386,6 +391,48 @@ def _per_mass(nodal, mass, filled, out):
 
 
 # ---------------------------------------------------------------- per-particle passes (literal d)
+@kernel_factory
+def _gradient(d):
+    def gradient(indptr, cols, values, v, L):
+        """L[p, c, a] = sum_k dS/dx_a[k] v[cols[k], c] over row p (values: S, then the gradient)."""
+        u = scratch((d, d))
+        for p in range(len(indptr) - 1):
+            for c in range(d):
+                for a in range(d):
+                    u[c, a] = 0.0
+            for k in range(indptr[p], indptr[p + 1]):
+                j = cols[k]
+                for a in range(d):
+                    w = values[1 + a, k]
+                    for c in range(d):
+                        u[c, a] += w * v[j, c]
+            for c in range(d):
+                for a in range(d):
+                    L[p, c, a] = u[c, a]
+    return gradient
+
+
+@kernel_factory
+def _particle_update(d, moving):
+    def particle_update(indptr, cols, values, a, v_grid, dt, v, x, v_out, x_out):
+        """v_out = v + dt (S a), x_out = x + dt (S v_grid) (moving) per particle row of S."""
+        ua, ux = scratch((d,)), scratch((d,))
+        for p in range(len(indptr) - 1):
+            for c in range(d):
+                ua[c], ux[c] = 0.0, 0.0
+            for k in range(indptr[p], indptr[p + 1]):
+                j, w = cols[k], values[0, k]
+                for c in range(d):
+                    ua[c] += w * a[j, c]
+                    if moving:
+                        ux[c] += w * v_grid[j, c]
+            for c in range(d):
+                v_out[p, c] = v[p, c] + dt * ua[c]
+                if moving:
+                    x_out[p, c] = x[p, c] + dt * ux[c]
+    return particle_update
+
+
 @kernel_factory
 def _deformation_update(d):
     def deformation_update(F, L, dt, out):
