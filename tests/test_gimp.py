@@ -102,3 +102,26 @@ def test_non_uniform_or_rotated_grid_is_rejected():
     c, s = np.cos(0.3), np.sin(0.3)
     with pytest.raises(InputError, match="mpm needs a uniform axis-aligned grid"):
         Lattice.from_mesh(MeshQuad(np.array([[c, -s], [s, c]]) @ m.p, m.t))
+
+
+def test_half_lengths_in_the_pass_match_the_separate_step():
+    """The weights pass forms cpGIMP's half-lengths itself (``F``): the same values as
+    `half_lengths` before it, on two threads (two chunks of particles and of nodes)."""
+    from skdgmpm import parallel
+
+    previous = parallel.set_threads(2)
+    try:
+        L = Lattice.from_mesh(rectangle(2.0, 2.0, 80, 80))
+        rng = np.random.default_rng(3)
+        x = L.origin + rng.uniform(0, 1, (20000, 2)) * (L.upper - L.origin)
+        x = x[np.argsort(np.floor(x[:, 1] / L.h[1]) * 1e3 + x[:, 0], kind="stable")]   # row by row
+        l0 = np.full(x.shape, L.h[0] / 4)
+        F = np.eye(2) + 0.6 * rng.uniform(-1, 1, (len(x), 2, 2))
+        fused = shape_functions(L, x, "cpgimp", l0, F=F)
+        apart = shape_functions(L, x, "cpgimp", half_lengths("cpgimp", l0, F, L.h))
+        assert np.array_equal(fused.values, apart.values) and np.array_equal(fused.cols, apart.cols)
+        T = parallel.Transposed(fused.indptr, fused.cols, L.n_nodes)
+        assert len(T.chunks) == 2
+        assert np.array_equal(T.first, fused.pattern_T.first) and np.array_equal(T.last, fused.pattern_T.last)
+    finally:
+        parallel.set_threads(previous)
