@@ -2,8 +2,8 @@
 and velocity (nf, d), impedances (nf, d, d), tangents C (nf, d, d, d, d), states Q = [P, v]
 (nf, d*d + d). Each function is one compiled loop over the faces calling the point functions of
 `skdgmpm.equations` (where the formulas are written), for the schemes that treat a face set at a
-time (boundary conditions, the DGFEM faces); the fused DGMPM and ADER face passes call the same
-point functions.
+time (boundary conditions); DGFEM's interior faces (`trace_fluxes`) and the fused DGMPM and ADER
+face passes call the same point functions from the traces, without face arrays.
 """
 import numpy as np
 from numba import njit
