@@ -133,6 +133,66 @@ def _picard_update_nc(U0, T, div, dt, scale, u_hat, new, nc, n_r, lo, hi):
     return change
 
 
+def _picard_step(Q, D, U0, T, dt, scale, u_hat, new):
+    """`_divergence_cells` of Q (R, nel, n, nc) with D (d, nel, n, n), then `_picard_update` from
+    it, in one pass over the cells: each point's divergence at every time node kept in registers,
+    never stored (the same operations, in the same order, for every entry; the change the same
+    max). U0, u_hat, new flat as in `_picard_update`."""
+    d, n, n_r, nc = D.shape[0], Q.shape[2], Q.shape[0], Q.shape[3]
+    literal = d == 2 and n in (4, 9) and n_r in (2, 3)      # 2D S1T1 / S2T2: the loops unrolled
+    kernel = _picard_step_kernel(d, n if literal else None, n_r if literal else None)
+    changes = parallel.rows(Q.shape[1], lambda lo, hi: kernel(Q, D, U0, T, dt, u_hat, new, lo, hi))   # cells lo:hi
+    big = np.array(changes)                                                                           # (chunks, nc)
+    big = np.where(np.isnan(big).any(axis=0), np.nan, big.max(axis=0)) / scale
+    return np.nan if np.isnan(big).any() else float(big.max())
+
+
+@kernel_factory
+def _picard_step_kernel(d, n, n_r):
+    if n is None:                       # sizes read at run time
+        def picard_step(Q, D, U0, T, dt, u_hat, new, lo, hi):
+            return _picard_step_n(Q, D, U0, T, dt, u_hat, new, lo, hi, d, Q.shape[2], Q.shape[0])
+    else:
+        def picard_step(Q, D, U0, T, dt, u_hat, new, lo, hi):
+            return _picard_step_n(Q, D, U0, T, dt, u_hat, new, lo, hi, d, n, n_r)
+    return picard_step
+
+
+@njit(cache=True, inline="always")
+def _picard_step_n(Q, D, U0, T, dt, u_hat, new, lo, hi, d, n, n_r):
+    nc = d * d + d
+    s, o, dv = scratch((nc,)), scratch((nc,)), scratch((n_r, nc))
+    big = np.zeros(nc)                  # max |new - u_hat| per component, nan once one is nan
+    for c in range(lo, hi):
+        for k in range(n):
+            for b in range(n_r):        # `_divergence_cells_dn` at (b, c, k)
+                for v in range(nc):
+                    o[v] = 0.0
+                for a in range(d):
+                    for v in range(nc):
+                        s[v] = 0.0
+                    for m in range(n):
+                        w = D[a, c, k, m]
+                        for v in range(nc):
+                            s[v] += w * Q[b, c, m, v]
+                    add_flux(s, a, 1.0, o, d)
+                for v in range(nc):
+                    dv[b, v] = o[v]
+            p = c * n + k
+            for t in range(len(new)):   # `_picard_update_nc` at point p
+                t_0, t_u = (t if len(U0) > 1 else 0), (t if len(u_hat) > 1 else 0)
+                for v in range(nc):
+                    j = p * nc + v
+                    acc = 0.0
+                    for r in range(n_r):
+                        acc += T[t, r] * dv[r, v]
+                    y = U0[t_0, j] - dt * acc
+                    new[t, j] = y
+                    x = abs(y - u_hat[t_u, j])
+                    big[v] = x if (x > big[v] or x != x) else big[v]
+    return big
+
+
 def _block_scale(U, dd):
     """Per component of the state (n, nc): the largest |U| of its block (F: the first dd
     components, p: the others), 1 where that is 0, nan if any is nan; the largest of the row
@@ -304,7 +364,7 @@ class ADERDGFEM(DGFEM):
         # two buffers, swapped every iteration; two allocations, not one of twice the size: past
         # glibc's mmap threshold (32 MiB, 256^2 P1) each step mapped it afresh and faulted it in
         u_hat, new = np.empty((n_t,) + U.shape), np.empty((n_t,) + U.shape)
-        div = np.empty((n_t,) + U.shape)
+        div = np.empty((1,) + U.shape)             # the Taylor guess's (the iterations keep theirs in registers)
         flat = lambda a: a.reshape(len(a), -1)      # noqa: E731 (views: (S, n_points nc))
         if self.picard_guess == "taylor":           # L23 eq 64: u_hat[s] = U - dt tau_s DIV F(Q(U))
             Q = law(U) if Q is None else np.ascontiguousarray(Q)
@@ -318,8 +378,7 @@ class ADERDGFEM(DGFEM):
         U0 = U[None] if source is None else U[None] + dt * np.tensordot(self.T_tau, source, axes=1)
         U0 = flat(np.ascontiguousarray(U0))
         for it in range(1, self.picard_max + 1):
-            _divergence_cells(law(u_hat), D, div)
-            change = _picard_update(U0, self.T_tau, flat(div), dt, scale, flat(u_hat), flat(new))
+            change = _picard_step(law(u_hat), D, U0, self.T_tau, dt, scale, flat(u_hat), flat(new))
             u_hat, new = new, u_hat
             if change <= self.picard_tol:
                 break
