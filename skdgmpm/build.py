@@ -163,7 +163,9 @@ def build(scene):
                    if name == "mpm" else ())
     # a limiter is checked for every method (DGMPM and MPM have none: a wrong name is still wrong)
     dg_options = (("limiter", LIMITERS),) + ((("backmap", BACKMAPS),) if name == "ader-dgmpm" else ())
-    for key, choices in (("integrator", integrators), ("transverse", ("dcu", "ctu")), *mpm_options, *dg_options):
+    layouts = ("auto", "nodes") if name == "dgmpm" else None
+    for key, choices in (("integrator", integrators), ("transverse", ("dcu", "ctu")), ("layout", layouts),
+                         *mpm_options, *dg_options):
         # ADER methods are their own time integrator: a scene's integrator key is ignored
         if choices is not None and key in method and method[key] not in choices:
             raise InputError(f"{scene.where(f'method.{key}')} = {method[key]!r}: expected one of "
@@ -181,7 +183,7 @@ def build(scene):
                              "internal variables needs integrator = 'euler' in dgmpm (RK2 would evaluate it at "
                              "the grid nodes, where its history does not live)")
         stepper = DGMPM(grid, particles, mats, bcs, cfl=cfl, integrator=integrator,
-                        transverse=method.get("transverse", "dcu"))
+                        transverse=method.get("transverse", "dcu"), layout=method.get("layout", "auto"))
     elif name == "mpm":              # the whole background grid; integrator/transverse keys are ignored
         stepper = MPM(grid, particles, mats, bcs, cfl=cfl, update=method.get("update", "usl"),
                       shape=method.get("shape", "cpgimp"), time_step_rule=method.get("time_step", "current"),

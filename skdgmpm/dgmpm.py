@@ -23,6 +23,14 @@ U + dt M^-1 (volume term + interior faces), the volume term (c) sum_alpha K^alph
 computed row by row and the interior faces' integral gathered node by node in that pass (neither
 is stored), to which the boundary faces' terms are then added, weighted by dt M^-1 (no residual
 array). ``volume_flux`` remains as the stand-alone statement of (c).
+
+With forward Euler and one particle strictly inside every cell (R18's usual layout; ``layout``
+"auto", `DGMPM._cellwise`), (a), (c), (f) and (g) reduce exactly: the projection puts the
+particle's state at the cell's nodes, the volume term sums to zero over them and the back map of
+the Euler stage is U_p + dt / V_p (sum of the cell's face fluxes). The step then runs on the
+particles' own arrays (the cell records read the particle, `dgmpm_kernels.cell_update` is (f)-(g))
+and keeps no nodal array, operator or trace: the same numbers up to round-off
+(tests/test_layout.py), a third of the memory and half the passes.
 """
 from dataclasses import dataclass, field
 
@@ -33,7 +41,7 @@ from skdgmpm.materials.points import law_table
 
 from . import parallel, system
 from .dgmpm_kernels import (boundary_edge_corrections, boundary_pass, boundary_sides, cell_corrections, cell_records,
-                            euler_update, integrate_faces, interior_pass, record_width)
+                            cell_update, euler_update, integrate_faces, interior_pass, record_width)
 from .errors import InputError
 from .faces import interior_faces
 from .integrators import INTEGRATORS
@@ -54,6 +62,8 @@ class DGMPM(GodunovScheme):
         shared faces; boundary faces with no condition are free (zero traction).
     cfl : Courant number; integrator : "euler" | "rk2"; transverse : "dcu" | "ctu" (2D)
     body_force : callable (X (n, d), t) -> b (n, d) in m/s^2, or None (no source, no cost)
+    layout : "auto" (one particle strictly inside every cell and forward Euler: the step on the
+        cells, `_cellwise`) | "nodes" (R18's nodal stages always)
     """
 
     grid: object
@@ -64,6 +74,7 @@ class DGMPM(GodunovScheme):
     integrator: str = "euler"
     transverse: str = "dcu"
     body_force: object = None
+    layout: str = "auto"
     stages: tuple = ("project", "time_step", "advance", "interface_flux", "boundary_flux",
                      "transverse_flux", "source", "nodal_state", "constitutive_update", "check")
     external_work: float = field(default=0.0, init=False)
@@ -82,26 +93,59 @@ class DGMPM(GodunovScheme):
                              "grid nodes, where the history does not live)")
         g, p = self.grid, self.particles
         self.d = g.dim
-        # built a chunk of cells at a time: the peak of the set-up is a chunk's basis, not the grid's
-        lumped, self.stiffness, S, self.dof_cell = particle_operators(g, p)
-        self.map = ParticleMap.build(S, p.volume, p.rho0, lumped)
-        del S
-        self.n_dofs = len(lumped)
         n_cells = g.submesh.nelements
+        self.cellwise = self._cellwise()
+        if self.cellwise:       # the particles' own arrays are the grid state: no operators kept
+            self.n_dofs = n_cells * len(g.element.doflocs)
+            self.point = np.empty(n_cells, dtype=np.int32)
+            self.point[p.cell] = np.arange(len(p), dtype=np.int32)
+            self.inv_volume = 1.0 / p.volume
+        else:
+            # built a chunk of cells at a time: the peak of the set-up is a chunk's basis, not the grid's
+            lumped, self.stiffness, S, self.dof_cell = particle_operators(g, p)
+            self.map = ParticleMap.build(S, p.volume, p.rho0, lumped)
+            del S
+            self.n_dofs = len(lumped)
+            self.inv_M = 1.0 / lumped
         self.cell_material = cell_values("materials", p.cell, p.material, n_cells)
         self.cell_volume = g.cell_volumes()
         self.h_min = float(g.cell_sizes().min())
-        self.interior = interior_faces(g.submesh, g.element, coordinates=False)    # X: not read here
+        # X: not read here; the traces: not with one particle per cell
+        self.interior = interior_faces(g.submesh, g.element, coordinates=False, traces=not self.cellwise)
         self._setup_boundary(g.element)
         self._setup_cell_faces()
         self._setup_transverse()
         self.laws = law_table(self.materials.materials)          # the compiled point laws
-        self.traces = {"L": parallel.csr(self.interior.T_L), "R": parallel.csr(self.interior.T_R),
-                       "boundary": parallel.csr(self.boundary.T_L)}
-        # -int Phi F* over the interior faces as a gather over each node's faces (`euler_update`)
         f = self.interior
-        self.gather_interior = parallel.csr((sp.diags(f.measure) @ (f.T_R - f.T_L)).T.tocsr())
-        self.inv_M = 1.0 / lumped
+        if self.cellwise:       # a boundary face's side: its cell's particle (weight 1: the same bits)
+            b = self.boundary
+            T = sp.csr_matrix((np.ones(len(b)), (np.arange(len(b)), self.point[b.cell_L])), shape=(len(b), len(p)))
+            self.traces = {"boundary": parallel.csr(T)}
+            self.cell_faces = self.cell_sources[0] if self.ctu is not None else self._cell_faces()
+        else:
+            self.traces = {"L": parallel.csr(f.T_L), "R": parallel.csr(f.T_R),
+                           "boundary": parallel.csr(self.boundary.T_L)}
+            # -int Phi F* over the interior faces as a gather over each node's faces (`euler_update`)
+            self.gather_interior = parallel.csr((sp.diags(f.measure) @ (f.T_R - f.T_L)).T.tocsr())
+
+    def _cellwise(self):
+        """Whether the step runs on the particles' own arrays (``layout`` "auto": forward Euler,
+        exactly one particle in every cell, strictly inside it). With the lumped mass, one particle
+        p in a cell makes the projection of (a) that particle's state at the cell's nodes, and
+        the back map (g) of the Euler stage (f) U_p + dt / V_p sum_i R_i (sum_i S_ip = 1, m_i =
+        S_ip V_p > 0): the volume term sums to zero over the nodes (sum_i grad Phi_i = 0), a
+        face's trace weights to one, a body force to V_p rho0 b. The step is then R18 §5 on the
+        cells (`dgmpm_kernels.cell_update`), the same numbers up to round-off, without the nodal
+        arrays, the operators or their passes; "nodes" keeps R18's nodal stages."""
+        if self.layout not in ("auto", "nodes"):
+            raise InputError(f"method.layout = {self.layout!r}: expected 'auto' or 'nodes'")
+        p, n_cells = self.particles, self.grid.submesh.nelements
+        if self.layout == "nodes" or self.integrator != "euler" or len(p) != n_cells:
+            return False
+        if not np.array_equal(np.bincount(p.cell, minlength=n_cells), np.ones(n_cells, dtype=np.int64)):
+            return False
+        e = self.grid.element
+        return all(np.all(e.lbasis(np.ascontiguousarray(p.xi.T), i)[0] > 0.0) for i in range(len(e.doflocs)))
 
     def _buffer(self, name, shape, dtype=float):
         """A work array of the step that no result refers to once the step is done (the nodal
@@ -125,7 +169,10 @@ class DGMPM(GodunovScheme):
         so the record keeps n/2 directions, otherwise one per face."""
         m, f = self.grid.submesh, self.interior
         n_cells = m.nelements
-        self.cell_dofs = np.argsort(self.dof_cell, kind="stable").astype(np.int32).reshape(n_cells, -1)
+        if self.cellwise:       # a cell's one "node": its particle (`cell_records` reads its state)
+            self.cell_dofs = self.point[:, None]
+        else:
+            self.cell_dofs = np.argsort(self.dof_cell, kind="stable").astype(np.int32).reshape(n_cells, -1)
         self.local_face = tuple(_local_face(m, cells, f.facets).astype(np.int8) for cells in (f.cell_L, f.cell_R))
         normal = np.zeros((m.nfacets, self.d))
         normal[f.facets], normal[self.boundary.facets] = f.normal, self.boundary.normal
@@ -167,33 +214,44 @@ class DGMPM(GodunovScheme):
             self._split = (split, *self._edge_gathers(sides))
         return self._split
 
+    def _cell_faces(self):
+        """Each cell's local faces k (n_cells, faces per cell) int32: 2 f + side for interior face
+        f, -1 - b for boundary face b (`cell_update`, `cell_corrections`)."""
+        m, f, b = self.grid.submesh, self.interior, self.boundary
+        faces = np.empty((m.nelements, m.t2f.shape[0]), np.int32)
+        faces[b.cell_L, _local_face(m, b.cell_L, b.facets)] = -1 - np.arange(len(b))
+        for s, (cells, k) in enumerate(((f.cell_L, self.local_face[0]), (f.cell_R, self.local_face[1]))):
+            faces[cells, k] = 2 * np.arange(len(f)) + s
+        return faces
+
     def _cell_sources(self):
         """What `cell_corrections` reads per cell and local face k (n_cells, 4): the row of the
-        face's fluctuation entering the cell, 2 f + side (int32; -1 - b for boundary face b), its
-        scale -1 / (2 h) (0 at boundary faces), and the sign that makes the cell's face direction
-        ``cell_normals[c, k % slots]`` the outward normal of face k (int8, exact)."""
+        face's fluctuation entering the cell, 2 f + side (int32; -1 - b for boundary face b:
+        `_cell_faces`), its scale -1 / (2 h) (0 at boundary faces), and the sign that makes the
+        cell's face direction ``cell_normals[c, k % slots]`` the outward normal of face k (int8,
+        exact)."""
         m, f, b = self.grid.submesh, self.interior, self.boundary
         n_cells, slots = m.nelements, self.cell_normals.shape[1]
-        sources = np.empty((n_cells, 4), np.int64)
         scale = np.zeros((n_cells, 4))
         outward = np.empty((n_cells, 4, 2))
-        k_b = _local_face(m, b.cell_L, b.facets)
-        sources[b.cell_L, k_b], outward[b.cell_L, k_b] = -1 - np.arange(len(b)), b.normal
+        outward[b.cell_L, _local_face(m, b.cell_L, b.facets)] = b.normal
         for s, (cells, k, sign) in enumerate(((f.cell_L, self.local_face[0], 1.0), (f.cell_R, self.local_face[1], -1.0))):
-            sources[cells, k] = 2 * np.arange(len(f)) + s
             scale[cells, k] = -1.0 / (2.0 * (self.cell_volume[cells] / f.measure))     # h as `side_topology`
             outward[cells, k] = sign * f.normal
         direction = self.cell_normals[:, np.arange(4) % slots]
         signs = np.where(np.all(outward == direction, axis=2), 1, -1).astype(np.int8)
         assert np.all(signs[..., None] * direction == outward), "a cell's opposite faces are not parallel"
-        return sources.astype(np.int32), scale, signs
+        return self._cell_faces(), scale, signs
 
     # ---------------------------------------------------------------- stages
     @stage
     def project(self, state, out=None):
         """(a) M_i U_i = sum_p S_ip V_p U_p; Q likewise (v from the projected momentum); into
-        ``out`` = (U, Q) nodal arrays if given."""
-        grid_state = GridState(*self.map.project_state(state.U, state.Q, self.d, out))
+        ``out`` = (U, Q) nodal arrays if given. With ``cellwise``, the particles' own arrays."""
+        if self.cellwise:
+            grid_state = GridState(state.U, state.Q)
+        else:
+            grid_state = GridState(*self.map.project_state(state.U, state.Q, self.d, out))
         self._kept = (grid_state, None)           # its Delta t-free terms, once computed
         return grid_state
 
@@ -212,7 +270,8 @@ class DGMPM(GodunovScheme):
         f, nc = self.interior, grid_state.U.shape[1]
         ctu = self.ctu is not None
         flux, corr_bnd = np.empty((len(f), nc)), np.zeros((len(self.boundary), nc))
-        T_L, T_R, rho, laws = self.traces["L"], self.traces["R"], self.map.rho, self.laws
+        T_L, T_R = (self.traces.get(side, _NO_TRACE) for side in ("L", "R"))
+        rho, laws = self.density, self.laws
         csr = parallel.csr_rows
 
         dofs, normals = self.cell_dofs, self.cell_normals
@@ -268,7 +327,7 @@ class DGMPM(GodunovScheme):
         nb = len(b)
         t_L, v_L, Z, rho = np.empty((nb, d)), np.empty((nb, d)), np.empty((nb, d, d)), np.empty(nb)
         C = np.empty((nb, d, d, d, d))
-        bad = boundary_sides(self.traces["boundary"], grid_state.U, grid_state.Q, self.map.rho, b.normal,
+        bad = boundary_sides(self.traces["boundary"], grid_state.U, grid_state.Q, self.density, b.normal,
                              b.cell_L, self.cell_material, *self.laws, t_L, v_L, Z, C, rho)
         if bad >= 0:
             _not_hyperbolic(bad)
@@ -389,7 +448,10 @@ class DGMPM(GodunovScheme):
             power = float(np.sum(b.measure * np.einsum("fi,fi->f", -p, v)))
         integrate_faces(self.traces["boundary"], b.measure, -1.0, flux, weight, out)
         if self.body_force is not None:          # int Phi rho0 b, the particles as quadrature
-            source = parallel.matmul(self.map.S_T, self.source(self.particles, time), scale=self.particles.volume)
+            p = self.particles
+            source = self.source(p, time)
+            source = p.volume[:, None] * source if self.cellwise else parallel.matmul(self.map.S_T, source,
+                                                                                      scale=p.volume)
             out += (weight[0] * weight[1])[:, None] * source
         return power
 
@@ -400,12 +462,18 @@ class DGMPM(GodunovScheme):
         faces and the source; also returns the boundary power (W)."""
         terms = self.fixed_terms(grid_state, time)
         flux, corr = terms[:2]
-        weight = (step, self.inv_M)              # step M^-1, node by node
         out = np.empty_like(base) if out is None else out
-        csr = parallel.csr_rows
-        parallel.rows(len(base), lambda lo, hi: euler_update(
-            csr(self.gather_interior, lo, hi), flux, corr, dt, grid_state.Q, csr(self.stiffness, lo, hi), base[lo:hi],
-            (step, self.inv_M[lo:hi]), out[lo:hi]))
+        if self.cellwise:                       # base, out: the particles'
+            weight = (step, self.inv_volume)
+            cell, m = self.particles.cell, self.interior.measure
+            parallel.rows(len(base), lambda lo, hi: cell_update(
+                cell[lo:hi], self.cell_faces, m, flux, corr, dt, step, self.inv_volume[lo:hi], base[lo:hi], out[lo:hi]))
+        else:
+            weight = (step, self.inv_M)              # step M^-1, node by node
+            csr = parallel.csr_rows
+            parallel.rows(len(base), lambda lo, hi: euler_update(
+                csr(self.gather_interior, lo, hi), flux, corr, dt, grid_state.Q, csr(self.stiffness, lo, hi),
+                base[lo:hi], (step, self.inv_M[lo:hi]), out[lo:hi]))
         power = self.add_boundary_terms(terms, time, dt, weight, out)
         return out, power
 
@@ -413,8 +481,10 @@ class DGMPM(GodunovScheme):
     def advance(self, grid_state, time, dt):
         """(f) forward Euler [R18 eq 20] or Heun's RK2 (`skdgmpm.integrators`), every stage on
         the grid: the first from the projected state, the second's law at the grid nodes."""
-        # forward Euler's one stage into a work array of the step (read by the back map, then dead)
-        out = self._buffer("nodal stage", grid_state.U.shape) if self.integrator == "euler" else None
+        # forward Euler's one stage into a work array of the step (read by the back map, then dead);
+        # with ``cellwise`` the particles' new U (a new array: the new state's)
+        out = (self._buffer("nodal stage", grid_state.U.shape) if self.integrator == "euler" and not self.cellwise
+               else None)
 
         def euler_stage(U, base, t, step):
             at = grid_state if U is grid_state.U else self.nodal_state(U)
@@ -428,15 +498,23 @@ class DGMPM(GodunovScheme):
         d = self.d
         F, p = system.split(U, d)
         P = self.materials.stress(F, self.cell_material[self.dof_cell])
-        return GridState(U, system.primitive(P, p, self.map.rho))
+        return GridState(U, system.primitive(P, p, self.density))
 
     # ---------------------------------------------------------------- driver-facing
+    @property
+    def density(self):
+        """rho0 at the nodes (`ParticleMap`), or the particles' with ``cellwise``."""
+        return self.particles.rho0 if self.cellwise else self.map.rho
+
     def step(self, state, dt_max=np.inf):
         shape = (self.n_dofs, state.U.shape[1])     # the step's nodal arrays: work arrays, reused
-        grid_state = self.project(state, (self._buffer("nodal U", shape), self._buffer("nodal Q", shape)))
+        grid_state = self.project(state, None if self.cellwise else (self._buffer("nodal U", shape),
+                                                                     self._buffer("nodal Q", shape)))
 
         def attempt(dt):
             U_nodes, work = self.advance(grid_state, state.t, dt)
+            if self.cellwise:                   # the particles' U already
+                return self.constitutive_update(state, U_nodes, dt), work
             # (g) U_p = sum_i S_ip U_i [R18 eq 40] (PIC), each particle's row computed in the
             # law's pass (h): one pass over the particles, not two
             U_p = np.empty(state.U.shape)
@@ -446,6 +524,9 @@ class DGMPM(GodunovScheme):
             return self.step_with_cfl_guard(state, dt_max, attempt)
         finally:
             self._kept = None       # the projected state and its terms: not held between steps
+
+
+_NO_TRACE = (np.zeros(1, np.int32), np.zeros(0, np.int32), np.zeros(0))    # an empty CSR triple: not read
 
 
 def _local_face(mesh, cells, facets):

@@ -535,3 +535,44 @@ def integrate_faces(T, measure, scale, flux, w, R):
     face order, weighted per node by w = (step, inv_M) as in `_integrate`."""
     for f in range(len(measure)):
         _integrate(T, f, scale * measure[f], flux[f], w, R)
+
+
+# ---------------------------------------------------------------- one particle per cell
+def cell_update(cell, faces, measure, flux, corr, dt, step, inv_volume, base, out):
+    """out[p] = base[p] + step / V_p sum_k s_k m_f (F*_f + dt corr_f) over the interior faces f of
+    the cell of each particle p (one per cell, `DGMPM` with ``cellwise``): the forward Euler stage
+    and the back map of R18 §5 (f)-(g) as they reduce with one particle strictly inside each
+    cell (the projection is that particle's state, the volume term sums to zero over the cell's
+    nodes, a face's trace weights to one). s_k = -1 where the cell is side L of face f, +1 side
+    R. cell (n,) the particle's cell; faces (n_cells, faces per cell) int32: 2 f + side of each
+    local face, negative at boundary faces (their terms are added after, `add_boundary_terms`);
+    corr as `interface_flux` keeps it (nf, sides, nc)."""
+    _cell_update(flux.shape[1], corr.shape[1], faces.shape[1])(cell, faces, measure, flux, corr, dt, step,
+                                                               inv_volume, base, out)
+
+
+@kernel_factory
+def _cell_update(nc, sides, n_faces):
+    def cell_update(cell, faces, measure, flux, corr, dt, step, inv_volume, base, out):
+        r = scratch((nc,))
+        for p in range(len(cell)):
+            c = cell[p]
+            for k in range(nc):
+                r[k] = 0.0
+            for j in range(n_faces):
+                s = faces[c, j]
+                if s < 0:
+                    continue
+                f = s >> 1
+                g = measure[f] if s & 1 else -measure[f]
+                for k in range(nc):
+                    if sides == 2:
+                        r[k] += g * (flux[f, k] + dt * (corr[f, 0, k] - corr[f, 1, k]))
+                    elif sides == 1:
+                        r[k] += g * (flux[f, k] + dt * corr[f, 0, k])
+                    else:
+                        r[k] += g * flux[f, k]
+            w = step * inv_volume[p]
+            for k in range(nc):
+                out[p, k] = base[p, k] + w * r[k]
+    return cell_update

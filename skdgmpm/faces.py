@@ -140,9 +140,10 @@ def _rows(fb, pointwise, coordinates=True):
 FACET_CHUNK = 16384     # interior facets per pair of facet bases (their arrays are the set-up's peak)
 
 
-def interior_faces(mesh, element, pointwise=False, intorder=None, coordinates=True):
+def interior_faces(mesh, element, pointwise=False, intorder=None, coordinates=True, traces=True):
     """Interior faces: one row per face (side averages) or per facet Gauss point (``pointwise``);
-    ``coordinates=False`` leaves their reference coordinates X out (None: 16 B per row).
+    ``coordinates=False`` leaves their reference coordinates X out (None: 16 B per row),
+    ``traces=False`` the trace operators (None: a scheme that reads its cells' states directly).
     The facet bases are built for FACET_CHUNK facets at a time and dropped (with the Jacobians
     scikit-fem memoises for them): each facet's rows depend on that facet alone, so the result is
     the same as from one pair of bases over all of them, at a fraction of the peak memory."""
@@ -155,8 +156,12 @@ def interior_faces(mesh, element, pointwise=False, intorder=None, coordinates=Tr
     kw.update(dofs=Dofs(mesh, element), disable_doflocs=True)
     for chunk in np.array_split(interior, max(1, -(-len(interior) // FACET_CHUNK))):
         fb = [InteriorFacetBasis(mesh, element, side=i, facets=chunk, **kw) for i in (0, 1)]
-        T_L, measure = trace(fb[0])
-        T_R, _ = trace(fb[1])
+        if traces:
+            T_L, measure = trace(fb[0])
+            T_R, _ = trace(fb[1])
+        else:
+            T_L = T_R = None
+            measure = fb[0].dx.sum(axis=1) if not pointwise else fb[0].dx.ravel()
         facets, normal, cell_L, X = _rows(fb[0], pointwise, coordinates)
         parts.append((facets, normal, measure, cell_L, _rows(fb[1], pointwise, False)[2], T_L, T_R, X))
         del fb
@@ -167,8 +172,8 @@ def interior_faces(mesh, element, pointwise=False, intorder=None, coordinates=Tr
         return FaceSet(*parts[0])
     column = list(zip(*parts))
     stack = lambda k: np.concatenate(column[k])                      # noqa: E731
-    return FaceSet(stack(0), stack(1), stack(2), stack(3), stack(4), sp.vstack(column[5], format="csr"),
-                   sp.vstack(column[6], format="csr"), stack(7) if coordinates else None)
+    T_L, T_R = (sp.vstack(column[k], format="csr") if traces else None for k in (5, 6))
+    return FaceSet(stack(0), stack(1), stack(2), stack(3), stack(4), T_L, T_R, stack(7) if coordinates else None)
 
 
 def boundary_faces(mesh, element, facets, n_dofs, pointwise=False, intorder=None):

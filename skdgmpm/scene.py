@@ -32,7 +32,7 @@ SCHEMA = {
     "initial": {"velocity": list, "F": list, "exact": bool, "field": dict},
     "boundaries": None,
     "bc": None,
-    "method": {"name": str, "integrator": str, "transverse": str, "cfl": NUMBER, "order": int,
+    "method": {"name": str, "integrator": str, "transverse": str, "layout": str, "cfl": NUMBER, "order": int,
                "mls_order": int, "backmap": str, "limiter": str, "update": str, "shape": str,
                "time_step": str, "cfl_above_limit": bool, "cfl_guard": str, "geometry": str},
     "run": {"t_end": NUMBER, "frames": int, "checkpoint_every": (int, str), "step_limit": int, "threads": int,

@@ -150,6 +150,11 @@ KEYS = (
     Key("method.transverse", "", '"dcu"', '"ctu"',
         "2D DGMPM: dcu (donor-cell upwind, no transverse waves) or ctu (corner transport upwind, R18 "
         "§5; a CFL of 1)", methods=("dgmpm",), dims=(2,)),
+    Key("method.layout", "", '"auto"', '"nodes"',
+        "auto: with forward Euler and one particle strictly inside every cell, the step runs on the "
+        "particles' own arrays (R18 §5 as it reduces there: the same numbers up to round-off, without "
+        "the nodal arrays); nodes: R18's nodal stages (projection, nodal update, back map) always",
+        methods=("dgmpm",)),
     Key("method.cfl", "", "1.0", "0.5",
         "Courant number, in (0, 2]: dt = CFL h_min / c_max (DG methods of order P: / (2P + 1))"),
     Key("method.order", "", "1", "2", "polynomial order P, 1..5 (dgmpm: 1 only)",

@@ -16,7 +16,8 @@ from skdgmpm.materials.points import law_table
 
 
 def _stepper(transverse):
-    scene = load_scene("plate_impact_neohookean_2d", ["grid.cells=[6, 5]", f'method.transverse="{transverse}"'])
+    scene = load_scene("plate_impact_neohookean_2d", ["grid.cells=[6, 5]", f'method.transverse="{transverse}"',
+                                                      'method.layout="nodes"'])     # random nodal states
     st = build(scene).stepper
     # two laws: the right half of the cells Saint-Venant-Kirchhoff
     st.materials = MaterialSet((NeoHookean(E=200e9, nu=0.3, rho=7800.0),
