@@ -15,6 +15,14 @@ STEEL = dict(E=2e11, nu=0.3, rho=7800.0)
 ALU = dict(E=7e10, nu=0.33, rho=2700.0)
 
 
+def real_span(R):
+    """A real basis of the span of eigenvectors R (nq, k) of real eigenvalues: LAPACK may return
+    a repeated eigenvalue's eigenvectors with complex phases, whose real parts alone can be
+    dependent; their real and imaginary parts span the same real invariant subspace."""
+    U, sigma, _ = np.linalg.svd(np.concatenate([R.real, R.imag], axis=1), full_matrices=False)
+    return U[:, : R.shape[1]]
+
+
 def godunov_state_eigen(P_L, v_L, P_R, v_R, C_L, C_R, rho_L, rho_R, N):
     """Reference path: Q* = Q_L + sum over left-going waves, from a full eigen-decomposition.
 
@@ -48,7 +56,7 @@ def godunov_state_eigen(P_L, v_L, P_R, v_R, C_L, C_R, rho_L, rho_R, N):
         tangents = null_space(N[f][None, :])                            # (d, d - 1)
         kernel = np.zeros((nq, d * (d - 1)))
         kernel[: d * d] = np.einsum("ij,am->iajm", np.eye(d), tangents).reshape(d * d, -1)
-        basis = np.concatenate([R_L[f][:, left[f]].real, kernel, R_R[f][:, right[f]].real], axis=1)
+        basis = np.concatenate([real_span(R_L[f][:, left[f]]), kernel, real_span(R_R[f][:, right[f]])], axis=1)
         delta = np.linalg.solve(basis, Q_R[f] - Q_L[f])
         n_left = left[f].sum()
         out[f] = Q_L[f] + basis[:, :n_left] @ delta[:n_left]
