@@ -75,6 +75,31 @@ def _states(d, assess, gathered):       # literals: the loops unrolled, the heal
     return states
 
 
+@kernel_factory
+def _stresses(d):                       # a literal d: the loops unrolled
+    def stresses(laws, params, index, F_n, h_n, h, P_n):
+        """P (n, d, d) at F (n, d, d) with the history of t_n and its update: each point copied
+        into stack scratch, embedded, and its law's `stress_update_point`."""
+        F, P, u = scratch((3, 3)), scratch((d, d)), scratch((d * d,))
+        n_h = h_n.shape[1]
+        h_k_n, h_k = scratch((n_h,)), scratch((n_h,))
+        for k in range(len(F_n)):
+            for i in range(d):
+                for a in range(d):
+                    u[i * d + a] = F_n[k, i, a]
+            for c in range(n_h):
+                h_k_n[c] = h_n[k, c]
+            _embed_point(u, F, d)
+            m = index[k]
+            stress_update_point(laws[m], params[m], F, h_k_n, h_k, P, d)
+            for c in range(n_h):
+                h[k, c] = h_k[c]
+            for i in range(d):
+                for a in range(d):
+                    P_n[k, i, a] = P[i, a]
+    return stresses
+
+
 @dataclass(frozen=True)
 class MaterialSet:
     """The scene's materials and, for a batch of points, which one applies (``index`` (n,))."""
@@ -189,13 +214,19 @@ class MaterialSet:
         return self._apply("first_piola", F, index, (d, d), d)
 
     def stress_update(self, F, index, history):
-        """(P, history_{n+1}) at F (n, d, d) from the internal variables of t_n (n, n_history)."""
-        if not self.n_history:
-            return self.stress(F, index), history
+        """(P, history_{n+1}) at F (n, d, d) from the internal variables of t_n (n, n_history):
+        one compiled pass of the point laws over the points, on the threads (a law without
+        internal variables returns ``history`` as it is)."""
         n, d = len(F), F.shape[1]
-        U = np.concatenate([F.reshape(n, d * d), np.zeros((n, d))], axis=1)
-        Q, history = self.update(U, index, np.ones(n), history)
-        return Q[:, : d * d].reshape(n, d, d), history
+        h_n = history if self.n_history else np.empty((n, 0))
+        if h_n is None:
+            h_n = self.initial_history(np.asarray(index))
+        P, h = np.empty((n, d, d)), np.empty_like(h_n)
+        F = np.ascontiguousarray(F, dtype=float)
+        (laws, params), kernel = self.laws, _stresses(d)
+        index = np.asarray(index, dtype=np.int64)
+        parallel.rows(n, lambda lo, hi: kernel(laws, params, index[lo:hi], F[lo:hi], h_n[lo:hi], h[lo:hi], P[lo:hi]))
+        return P, (h if self.n_history else history)
 
     def tangent(self, F, index):
         """C = dP/dF restricted to the d-dimensional system: (n, d, d, d, d); for a law with

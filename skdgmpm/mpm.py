@@ -199,6 +199,7 @@ class MPM(GodunovScheme):
                     self.tractions.append((force, bc.schedule))
             else:
                 raise InputError(f"bc: condition {type(bc).__name__} is not supported by mpm")
+        self.acting = self.constrained.any(axis=1)                      # nodes with an imposed component
 
     def _surface_particles(self, facets, axis):
         """Particles of the cells next to boundary ``facets`` (nf,) in the layer nearest to each
@@ -268,15 +269,16 @@ class MPM(GodunovScheme):
         velocity (for a law whose energy is quadratic in F, exactly the stored energy that part of
         the update adds). The reaction of the forces at t_n (-f_int(sigma_n) on the nodes), booked
         before, lags half a step in USL/CD (the first step's strain energy came with no work) and
-        leads half a step in USF (docs/results.md)."""
+        leads half a step in USF (docs/results.md). Only a particle with a constrained node has
+        L^C != 0: the others' power is 0 without the gradient (the same bits)."""
         if not self.constraints:
             return 0.0
         v_imposed = np.where(self.constrained, s.v_grid, 0.0)
-        LC = self._gradient(s, v_imposed)
-        power = np.empty(len(F_n))                  # per particle, summed once (any thread count)
-        kernel = _constraint_power(self.d)
-        parallel.rows(len(F_n), lambda lo, hi: kernel(self.particles.volume[lo:hi], P_n[lo:hi], s.P[lo:hi],
-                                                      LC[lo:hi], F_n[lo:hi], power[lo:hi]))
+        power = np.empty(len(F_n))              # per particle, summed once (any thread count)
+        sf, kernel = s.shape, _constraint_power(self.d)
+        parallel.rows(len(F_n), lambda lo, hi: kernel(sf.indptr[lo:hi + 1], sf.cols, sf.values, v_imposed, self.acting,
+                                                      self.particles.volume[lo:hi], P_n[lo:hi], s.P[lo:hi], F_n[lo:hi],
+                                                      power[lo:hi]))
         return s.dt * float(np.sum(power))
 
     @staticmethod
@@ -391,21 +393,27 @@ def _per_mass(nodal, mass, filled, out):
 
 
 # ---------------------------------------------------------------- per-particle passes (literal d)
+@njit(cache=True, inline="always")
+def _gradient_row(indptr, cols, values, v, p, u, d):
+    """u[c, a] = sum_k dS/dx_a[k] v[cols[k], c] over row p (values: S, then the gradient)."""
+    for c in range(d):
+        for a in range(d):
+            u[c, a] = 0.0
+    for k in range(indptr[p], indptr[p + 1]):
+        j = cols[k]
+        for a in range(d):
+            w = values[1 + a, k]
+            for c in range(d):
+                u[c, a] += w * v[j, c]
+
+
 @kernel_factory
 def _gradient(d):
     def gradient(indptr, cols, values, v, L):
-        """L[p, c, a] = sum_k dS/dx_a[k] v[cols[k], c] over row p (values: S, then the gradient)."""
+        """L_p = sum_i v_i (x) grad S_ip per particle row (`_gradient_row`)."""
         u = scratch((d, d))
         for p in range(len(indptr) - 1):
-            for c in range(d):
-                for a in range(d):
-                    u[c, a] = 0.0
-            for k in range(indptr[p], indptr[p + 1]):
-                j = cols[k]
-                for a in range(d):
-                    w = values[1 + a, k]
-                    for c in range(d):
-                        u[c, a] += w * v[j, c]
+            _gradient_row(indptr, cols, values, v, p, u, d)
             for c in range(d):
                 for a in range(d):
                     L[p, c, a] = u[c, a]
@@ -463,15 +471,27 @@ def _kirchhoff(d):
 
 @kernel_factory
 def _constraint_power(d):
-    def constraint_power(volume, P_n, P, LC, F_n, out):
-        """out = V0 (P_n + P)/2 : (LC F_n) per particle."""
+    def constraint_power(indptr, cols, values, v_imposed, acting, volume, P_n, P, F_n, out):
+        """out = V0 (P_n + P)/2 : (LC F_n) per particle, LC = sum_i v_imposed_i (x) grad S_ip
+        (`_gradient_row`); 0 for a particle none of whose nodes is ``acting`` (LC = 0: the same
+        bits, without the gradient)."""
+        LC = scratch((d, d))
         for p in range(len(P)):
+            touched = False
+            for k in range(indptr[p], indptr[p + 1]):
+                if acting[cols[k]]:
+                    touched = True
+                    break
+            if not touched:
+                out[p] = 0.0
+                continue
+            _gradient_row(indptr, cols, values, v_imposed, p, LC, d)
             s = 0.0
             for i in range(d):
                 for j in range(d):
                     g = 0.0
                     for k in range(d):
-                        g += LC[p, i, k] * F_n[p, k, j]
+                        g += LC[i, k] * F_n[p, k, j]
                     s += 0.5 * (P_n[p, i, j] + P[p, i, j]) * g
             out[p] = volume[p] * s
     return constraint_power
