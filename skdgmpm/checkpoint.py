@@ -5,7 +5,7 @@
 - the state: every field of `ParticleState` (t, step, U, Q, x, the wave speeds that set the next
   time step, the grid dofs of DGFEM, the health record, the laws' internal variables ``history``);
 - the steppers' own run state, which a step reads or accumulates (`RUN_STATE`): the boundary work
-  ``external_work`` and ``dt_trend`` (every stepper), ``picard`` (ADER: predictor iteration counts) and
+  ``external_work``, ``dt_trend`` and ``dt_recent`` (every stepper), ``picard`` (ADER: predictor iteration counts) and
   ``limited_cells`` (DGFEM: the limiter's count). Everything else a stepper sets while stepping
   is a cache rebuilt from the state at the start of each step (DGMPM ``_kept``, DGFEM and ADER
   ``history_n``, ADER ``_repeated``, MPM ``_last_shape``: arrays the next step overwrites; DGMPM
@@ -34,7 +34,7 @@ from .outdir import atomic_write
 
 NAME = "checkpoint.npz"
 FORMAT = 1
-RUN_STATE = ("external_work", "dt_trend", "limited_cells", "picard")
+RUN_STATE = ("external_work", "dt_trend", "dt_recent", "limited_cells", "picard")
 DEFAULT_EVERY = "10 min"
 _UNITS = {"s": 1.0, "min": 60.0, "h": 3600.0}
 

@@ -102,6 +102,9 @@ def _timed(method, name):
     return timed
 
 
+DT_WINDOW = 8                   # states whose CFL steps bound a predicted step (`step_with_cfl_guard`)
+
+
 class GodunovScheme:
     """Base of the steppers: needs ``d``, ``materials``, ``bcs``, ``cell_material``,
     ``particles`` (the points carrying the state), ``interior``, ``n_dofs``, ``cfl`` and
@@ -110,6 +113,7 @@ class GodunovScheme:
     face_options = {}
     external_work = 0.0
     dt_trend = 1.0               # the wave speed's change over the last step (`step_with_cfl_guard`)
+    dt_recent = ()               # the CFL steps of the last DT_WINDOW states (`step_with_cfl_guard`)
     cfl_guard = "predict"        # or "largest" (method.cfl_guard)
     body_force = None            # b(X, t) -> (n, d) in m/s^2 (a manufactured solution's); None: no source
     stages = ()                  # the `stage` methods of a step, in the order they run
@@ -250,11 +254,17 @@ class GodunovScheme:
         waves of the new state are faster than the CFL condition allowed (e.g. the first step of
         an impact on a stiffening law). With ``cfl_guard = "predict"`` the first attempt takes the
         state's CFL step scaled by how much the waves sped up over the last step (``dt_trend`` =
-        c_n / c_(n+1), in [1/2, 1]; 1 while they do not speed up): on a stiffening impact the
-        guard repeats less often (a repeat costs most of a step), at the price of steps a little
-        below the largest admissible one; ``"largest"`` always starts from the state's CFL step."""
+        c_n / c_(n+1), in [1/2, 1]; 1 while they do not speed up), and no more than the CFL step
+        of any of the last DT_WINDOW states (``dt_recent``): the fastest wave of an impact jitters
+        by about 1 % from step to step, and a step as long as the current state allows was
+        repeated at every jitter up (28 % of the steps of the bench's plate; 11 % with the
+        window, for steps 1 % shorter on average). A repeat costs a whole step; ``"largest"``
+        always starts from the state's CFL step."""
         dt_cfl = self.time_step(state)
-        dt = min(dt_cfl * (self.dt_trend if self.cfl_guard == "predict" else 1.0), dt_max)
+        if self.cfl_guard == "predict":
+            dt = min(dt_cfl * self.dt_trend, *self.dt_recent, dt_max)
+        else:
+            dt = min(dt_cfl, dt_max)
         for _ in range(4):
             new = None          # a refused attempt's state is not held through the next attempt
             new, work = attempt(dt)
@@ -263,6 +273,7 @@ class GodunovScheme:
                 break
             dt = dt_new
         self.dt_trend = min(1.0, max(0.5, dt_new / dt_cfl))
+        self.dt_recent = (*self.dt_recent, dt_new)[-DT_WINDOW:]
         self.external_work += work
         return new
 
