@@ -183,7 +183,8 @@ def build(scene):
                              "internal variables needs integrator = 'euler' in dgmpm (RK2 would evaluate it at "
                              "the grid nodes, where its history does not live)")
         stepper = DGMPM(grid, particles, mats, bcs, cfl=cfl, integrator=integrator,
-                        transverse=method.get("transverse", "dcu"), layout=method.get("layout", "auto"))
+                        transverse=method.get("transverse", "dcu"), layout=method.get("layout", "auto"),
+                        particles_key=scene.where("particles.file" if scene.get("particles.file") else "particles.per_cell"))
     elif name == "mpm":              # the whole background grid; integrator/transverse keys are ignored
         stepper = MPM(grid, particles, mats, bcs, cfl=cfl, update=method.get("update", "usl"),
                       shape=method.get("shape", "cpgimp"), time_step_rule=method.get("time_step", "current"),

@@ -75,6 +75,7 @@ class DGMPM(GodunovScheme):
     transverse: str = "dcu"
     body_force: object = None
     layout: str = "auto"
+    particles_key: str = "particles"        # what the errors about the particles name (their scene key)
     stages: tuple = ("project", "time_step", "advance", "interface_flux", "boundary_flux",
                      "transverse_flux", "source", "nodal_state", "constitutive_update", "check")
     external_work: float = field(default=0.0, init=False)
@@ -106,6 +107,7 @@ class DGMPM(GodunovScheme):
             self.map = ParticleMap.build(S, p.volume, p.rho0, lumped)
             del S
             self.n_dofs = len(lumped)
+            self._check_covered(lumped)
             self.inv_M = 1.0 / lumped
         self.cell_material = cell_values("materials", p.cell, p.material, n_cells)
         self.cell_volume = g.cell_volumes()
@@ -146,6 +148,18 @@ class DGMPM(GodunovScheme):
             return False
         e = self.grid.element
         return all(np.all(e.lbasis(np.ascontiguousarray(p.xi.T), i)[0] > 0.0) for i in range(len(e.doflocs)))
+
+    def _check_covered(self, lumped):
+        """Every node of a cell with particles needs mass (m_i = sum_p S_ip V_p > 0, R18 eq 38): a
+        cell whose particles all lie on the edges opposite one of its nodes leaves it none."""
+        empty = np.flatnonzero(lumped <= 0.0)
+        if len(empty):
+            cell = int(self.dof_cell[empty[0]])
+            inside = np.flatnonzero(self.particles.cell == cell)
+            where = ", ".join(f"#{k} at {tuple(float(x) for x in self.particles.X[k])}" for k in inside[:3])
+            raise InputError(f"{self.particles_key}: cell {cell} holds only particles on its edges ({where}): "
+                             f"{len(empty)} node(s) of the grid get no mass (DGMPM lumps S_ip V_p onto a cell's "
+                             "nodes): move such particles inside their cells")
 
     def _buffer(self, name, shape, dtype=float):
         """A work array of the step that no result refers to once the step is done (the nodal

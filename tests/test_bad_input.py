@@ -195,6 +195,22 @@ def test_particle_outside_the_grid(capsys, here):
     assert_no_output(here / "out")
 
 
+def test_particle_alone_on_a_cell_corner(capsys, here):
+    """A cell whose only particle sits on its corner leaves three of its nodes without mass
+    (S_ip = 0 there): DGMPM's nodal projection would divide by zero (it once raised
+    ZeroDivisionError from the kernel); a one-line error names the file's key and the particle."""
+    centres = [(0.25 + 0.5 * i, 0.25 + 0.5 * j) for i in range(8) for j in range(6)]
+    centres[0] = (0.0, 0.0)                     # cell 0's only particle, on the grid's corner
+    (here / "points.csv").write_text("".join(f"{x},{y}\n" for x, y in centres))
+    path = here / "points.toml"
+    path.write_text(scene_text("plate_impact_neohookean_2d", replace=[("[particles]\nper_cell = 1", '[particles]\nfile = "points.csv"')]))
+    rc, _, err = cli(capsys, "run", path, "--out", here / "out", "--set", "grid.cells=[8, 6]", "--set", "run.t_end=1e-5",
+                     "--quiet")
+    assert rc == 2
+    one_line_error(err, "particles.file", "cell 0", "#0 at (0.0, 0.0)", "no mass")
+    assert_no_output(here / "out")
+
+
 def test_particle_file_missing(capsys, here):
     path = here / "points.toml"
     path.write_text(scene_text("bar_elastic_1d",

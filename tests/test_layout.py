@@ -62,16 +62,17 @@ def test_nodal_stages_where_the_reduction_does_not_hold(overrides):
 
 
 @pytest.mark.filterwarnings("ignore:divide by zero")       # that node's 1 / m_i (the nodal path's own)
-def test_a_particle_on_a_cell_edge_keeps_the_nodal_stages():
-    """A particle where a node's shape function vanishes: that node has no mass, the lumped
-    projection does not hold there."""
+def test_a_particle_on_a_cell_edge_is_not_cellwise_and_one_clear_error():
+    """A particle where a node's shape function vanishes: the lumped projection does not hold
+    there, so the layout is not taken as cellwise; alone in its cell it leaves that node with no
+    mass, which the nodal stages refuse with one clear error (not a division by zero)."""
     st = build(load_scene("bar_elastic_1d", ["grid.cells=[10]"])).stepper
     assert st.cellwise
     xi = st.particles.xi.copy()
     xi[3] = 0.0                             # on the cell's left node: the right node's Phi is 0
     moved = dataclasses.replace(st.particles, xi=xi)
-    again = DGMPM(st.grid, moved, st.materials, st.bcs, cfl=st.cfl, transverse=st.transverse)
-    assert not again.cellwise
+    with pytest.raises(InputError, match=r"cell 3 holds only particles on its edges \(#3 at"):
+        DGMPM(st.grid, moved, st.materials, st.bcs, cfl=st.cfl, transverse=st.transverse)
 
 
 def test_unknown_layout_is_one_clear_error():
