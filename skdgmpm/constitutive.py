@@ -76,13 +76,18 @@ def _states(d, assess, gathered):       # literals: the loops unrolled, the heal
 
 
 @kernel_factory
-def _stresses(d):                       # a literal d: the loops unrolled
-    def stresses(laws, params, index, F_n, h_n, h, P_n):
+def _stresses(d, assess):               # literals: the loops unrolled, the health computed or not
+    def stresses(laws, params, index, F_n, h_n, h, P_n, health):
         """P (n, d, d) at F (n, d, d) with the history of t_n and its update: each point copied
-        into stack scratch, embedded, and its law's `stress_update_point`."""
-        F, P, u = scratch((3, 3)), scratch((d, d)), scratch((d * d,))
+        into stack scratch, embedded, and its law's `stress_update_point`. With ``assess``, also
+        the point's health at the law's tangent into ``health`` = (finite, J, lowest, speed,
+        densities of the materials), as `skdgmpm.health.assess` computes it where the rest of the
+        state (momentum, velocity) is finite: ``finite`` covers F and P."""
+        F, P, u, C = scratch((3, 3)), scratch((d, d)), scratch((d * d,)), scratch((d, d, d, d))
         n_h = h_n.shape[1]
         h_k_n, h_k = scratch((n_h,)), scratch((n_h,))
+        first, J_min, omega_min = -1, np.inf, np.inf
+        finite, J, lowest, speed, rho_m = health
         for k in range(len(F_n)):
             for i in range(d):
                 for a in range(d):
@@ -91,12 +96,26 @@ def _stresses(d):                       # a literal d: the loops unrolled
                 h_k_n[c] = h_n[k, c]
             _embed_point(u, F, d)
             m = index[k]
-            stress_update_point(laws[m], params[m], F, h_k_n, h_k, P, d)
+            if assess and d > 1:            # the tangent beside the stress (1D: called apart, below)
+                stress_tangent_point(laws[m], params[m], F, h_k_n, h_k, P, C, d)
+            else:
+                stress_update_point(laws[m], params[m], F, h_k_n, h_k, P, d)
             for c in range(n_h):
                 h[k, c] = h_k[c]
+            ok = True
             for i in range(d):
                 for a in range(d):
                     P_n[k, i, a] = P[i, a]
+                    ok = ok and np.isfinite(P[i, a]) and np.isfinite(u[i * d + a])
+            if assess:
+                finite[k] = ok
+                if not ok or d == 1:        # not finite: the health of F = I; 1D: the tangent called apart
+                    identity_if_not(ok, F)
+                    tangent_call(laws[m], params[m], F, C, d)
+                J[k], lo, speed[k] = health_point(F, C, rho_m[m], d)
+                lowest[k] = lo if ok else np.nan
+                first, J_min, omega_min = tally(k, ok, J[k], lowest[k], first, J_min, omega_min)
+        return first, J_min, omega_min
     return stresses
 
 
@@ -213,20 +232,31 @@ class MaterialSet:
         d = F.shape[1]
         return self._apply("first_piola", F, index, (d, d), d)
 
-    def stress_update(self, F, index, history):
+    def stress_update(self, F, index, history, assess=False):
         """(P, history_{n+1}) at F (n, d, d) from the internal variables of t_n (n, n_history):
         one compiled pass of the point laws over the points, on the threads (a law without
-        internal variables returns ``history`` as it is)."""
+        internal variables returns ``history`` as it is). With ``assess``: (P, history, health),
+        the `skdgmpm.health.Health` of the points' F and P at the law's tangent in the same pass
+        (`Health.finite` covers F and P only: the caller checks the rest of its state)."""
         n, d = len(F), F.shape[1]
         h_n = history if self.n_history else np.empty((n, 0))
         if h_n is None:
             h_n = self.initial_history(np.asarray(index))
         P, h = np.empty((n, d, d)), np.empty_like(h_n)
+        m = n if assess else 0
+        health = (np.empty(m, dtype=np.bool_), np.empty(m), np.empty(m), np.empty(m), self.densities)
         F = np.ascontiguousarray(F, dtype=float)
-        (laws, params), kernel = self.laws, _stresses(d)
+        (laws, params), kernel = self.laws, _stresses(d, assess)
         index = np.asarray(index, dtype=np.int64)
-        parallel.rows(n, lambda lo, hi: kernel(laws, params, index[lo:hi], F[lo:hi], h_n[lo:hi], h[lo:hi], P[lo:hi]))
-        return P, (h if self.n_history else history)
+
+        def rows(lo, hi):
+            return tuple(a[lo:hi] for a in health[:4]) + health[4:] if assess else health
+        results = parallel.rows(n, lambda lo, hi: kernel(laws, params, index[lo:hi], F[lo:hi], h_n[lo:hi], h[lo:hi],
+                                                         P[lo:hi], rows(lo, hi)))
+        h = h if self.n_history else history
+        if not assess:
+            return P, h
+        return P, h, Health(*health[:4], summarise(parallel.chunks(n), results))
 
     def tangent(self, F, index):
         """C = dP/dF restricted to the d-dimensional system: (n, d, d, d, d); for a law with

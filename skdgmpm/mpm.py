@@ -74,6 +74,7 @@ class StepData:
     a: np.ndarray = None           # (n_nodes, d)
     work: float = 0.0              # work of the external forces on the free components in the step (J)
     work_constraints: float = 0.0  # work of the imposed velocities in the step (J), from strain_stress
+    health: object = None          # Health of F and P at the new state, from strain_stress
 
 
 @dataclass
@@ -252,13 +253,14 @@ class MPM(GodunovScheme):
     @stage
     def strain_stress(self, s):
         """L_p = sum_i v_i (x) grad S_ip, F <- (I + dt L) F, P = P(F, history) with the history
-        of t_n (the particles' internal variables: once per step in every variant)."""
+        of t_n (the particles' internal variables: once per step in every variant), with the
+        new state's health at the law's tangent in the same pass (`check`)."""
         L = self._gradient(s, s.v_grid)
         F_n, P_n = s.F, s.P
         s.F = np.empty_like(F_n)
         kernel = _deformation_update(self.d)
         parallel.rows(len(F_n), lambda lo, hi: kernel(F_n[lo:hi], L[lo:hi], s.dt, s.F[lo:hi]))
-        s.P, s.history = self.materials.stress_update(s.F, self.particles.material, s.history)
+        s.P, s.history, s.health = self.materials.stress_update(s.F, self.particles.material, s.history, assess=True)
         s.work_constraints = self._constraint_work(s, F_n, P_n)
 
     def _constraint_work(self, s, F_n, P_n):
@@ -380,9 +382,23 @@ class MPM(GodunovScheme):
             getattr(self, stage)(s)
         new = ParticleState(state.t + s.dt, system.join(s.F, self.particles.rho0[:, None] * s.v),
                             system.join(s.P, s.v), s.x, state.step + 1, history=s.history)
-        self.check(new)
+        # the health of F and P came with the stress; it is the state's where p and v are finite
+        # (else the whole check again: the first bad point and its message)
+        finite = _all_finite(new.U[:, self.d * self.d:]) and _all_finite(s.v)
+        self.check(new, s.health if finite else None)
         self.external_work += s.work + s.work_constraints
         return new
+
+
+@njit(cache=True, nogil=True)
+def _all_finite(a):
+    """Whether every entry of a (n, k) array (a strided view will do) is finite: one pass, no
+    temporaries."""
+    for i in range(a.shape[0]):
+        for k in range(a.shape[1]):
+            if not np.isfinite(a[i, k]):
+                return False
+    return True
 
 
 @njit(cache=True, nogil=True)

@@ -117,6 +117,39 @@ def test_the_law_pass_assesses_the_state_as_the_stand_alone_check_and_numpy_do(d
     np.testing.assert_allclose(fused.speed[ok], speed, rtol=1e-14)
 
 
+@pytest.mark.parametrize("d", [1, 2, 3])
+def test_the_stress_pass_assesses_f_and_p_as_the_stand_alone_check(d):
+    """`MaterialSet.stress_update(..., assess=True)` (MPM: the health beside the stress, one pass)
+    gives the stress and history of the pass without it, bit for bit, and the health arrays and
+    summary of `health.assess` on the state [F, p], [P, v] with p, v finite; three laws, one with
+    internal variables that flow, one point not finite."""
+    from types import SimpleNamespace
+    from skdgmpm import system
+    from skdgmpm.constitutive import MaterialSet
+    from skdgmpm.health import assess
+    from skdgmpm.materials import J2Plasticity, NeoHookean, SaintVenantKirchhoff
+
+    rng = np.random.default_rng(5)
+    n = 60
+    materials = MaterialSet((NeoHookean(E=200e9, nu=0.3, rho=7800.0), SaintVenantKirchhoff(E=70e9, nu=0.33, rho=2700.0),
+                             J2Plasticity(E=200e9, nu=0.3, rho=7800.0, sigma_y=2e8, H=1e9)))
+    index = rng.integers(0, 3, n)
+    F = np.eye(d)[None] + 0.05 * rng.standard_normal((n, d, d))
+    F[11, 0, 0] = np.inf
+    history = materials.initial_history(index)
+    P_alone, h_alone = materials.stress_update(F, index, history)
+    P, h, fused = materials.stress_update(F, index, history, assess=True)
+    np.testing.assert_array_equal(P, P_alone)
+    np.testing.assert_array_equal(h, h_alone)
+    assert h[index == 2, 0].max() > 0                                   # the J2 points flowed
+    v = rng.standard_normal((n, d))
+    U, Q = system.join(F, materials.densities[index][:, None] * v), system.join(P, v)
+    alone = assess(materials, SimpleNamespace(material=index), U, Q)
+    for name in ("finite", "J", "omega", "speed"):
+        np.testing.assert_array_equal(getattr(fused, name), getattr(alone, name), err_msg=name)
+    assert fused.summary == alone.summary and fused.summary[0] == 11
+
+
 def test_the_chunks_summaries_combine_as_one_pass_over_the_points():
     """Two threads, so two chunks: the first bad point in the second chunk, the minima over both
     (`health.summarise`), as numpy's over the whole arrays."""
