@@ -61,7 +61,6 @@ def test_nodal_stages_where_the_reduction_does_not_hold(overrides):
     assert not disc.stepper.cellwise
 
 
-@pytest.mark.filterwarnings("ignore:divide by zero")       # that node's 1 / m_i (the nodal path's own)
 def test_a_particle_on_a_cell_edge_is_not_cellwise_and_one_clear_error():
     """A particle where a node's shape function vanishes: the lumped projection does not hold
     there, so the layout is not taken as cellwise; alone in its cell it leaves that node with no
