@@ -5,10 +5,10 @@ from functools import cached_property
 import numpy as np
 from numba import njit
 
-from skdgmpm.materials.points import law_table, stress_tangent_point, stress_update_point
+from skdgmpm.materials.points import law_table, stress_tangent_point, stress_update_point, tangent_call
 
 from .equations import embed as _embed_point
-from .health import Health, point_health, summarise
+from .health import Health, health_point, identity_if_not, summarise, tally
 from .parallel import row_product
 from . import parallel
 from .kernel_cache import kernel_factory, scratch
@@ -31,7 +31,7 @@ def _states(d, assess, gathered):       # literals: the loops unrolled, the heal
         first, J_min, omega_min = -1, np.inf, np.inf
         n_h = h_n.shape[1]
         h_k_n, h_k = scratch((n_h,)), scratch((n_h,))
-        rho_m = health[4]
+        finite, J, lowest, speed, rho_m = health
         for k in range(len(U)):
             if gathered:
                 indptr, indices, data, nodal = gather
@@ -61,8 +61,13 @@ def _states(d, assess, gathered):       # literals: the loops unrolled, the heal
             if assess:
                 for c in range(nc):
                     ok = ok and np.isfinite(u[c])
-                first, J_min, omega_min = point_health(k, ok, laws[m], params[m], F, C, rho_m[m], d, health,
-                                                       first, J_min, omega_min)
+                finite[k] = ok
+                if not ok or d == 1:        # not finite: the health of F = I; 1D: the tangent called apart
+                    identity_if_not(ok, F)
+                    tangent_call(laws[m], params[m], F, C, d)
+                J[k], lo, speed[k] = health_point(F, C, rho_m[m], d)
+                lowest[k] = lo if ok else np.nan
+                first, J_min, omega_min = tally(k, ok, J[k], lowest[k], first, J_min, omega_min)
                 x, v_old, half_dt, x_new = motion
                 for i in range(x.shape[1]):
                     x_new[k, i] = x[k, i] + half_dt * (v_old[k, i] + Q[k, dd + i])
@@ -82,7 +87,7 @@ def _stresses(d, assess):               # literals: the loops unrolled, the heal
         n_h = h_n.shape[1]
         h_k_n, h_k = scratch((n_h,)), scratch((n_h,))
         first, J_min, omega_min = -1, np.inf, np.inf
-        rho_m = health[4]
+        finite, J, lowest, speed, rho_m = health
         for k in range(len(F_n)):
             for i in range(d):
                 for a in range(d):
@@ -103,8 +108,13 @@ def _stresses(d, assess):               # literals: the loops unrolled, the heal
                     P_n[k, i, a] = P[i, a]
                     ok = ok and np.isfinite(P[i, a]) and np.isfinite(u[i * d + a])
             if assess:
-                first, J_min, omega_min = point_health(k, ok, laws[m], params[m], F, C, rho_m[m], d, health,
-                                                       first, J_min, omega_min)
+                finite[k] = ok
+                if not ok or d == 1:        # not finite: the health of F = I; 1D: the tangent called apart
+                    identity_if_not(ok, F)
+                    tangent_call(laws[m], params[m], F, C, d)
+                J[k], lo, speed[k] = health_point(F, C, rho_m[m], d)
+                lowest[k] = lo if ok else np.nan
+                first, J_min, omega_min = tally(k, ok, J[k], lowest[k], first, J_min, omega_min)
         return first, J_min, omega_min
     return stresses
 

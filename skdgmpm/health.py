@@ -139,21 +139,6 @@ def tally(k, ok, J, lowest, first, J_min, omega_min):
     return first, J_min, omega_min
 
 
-@njit(cache=True, inline="always")
-def point_health(k, ok, law, prm, F, C, rho, d, health, first, J_min, omega_min):
-    """A law's pass, after point k's stress (and, for d > 1, its tangent C at F): the point's
-    health into ``health`` = (finite, J, lowest, speed, ...) as `assess` computes it (at F = I
-    where its values are not finite; 1D: the tangent called here) and the chunk's `tally`."""
-    finite, J, lowest, speed = health[0], health[1], health[2], health[3]
-    finite[k] = ok
-    if not ok or d == 1:
-        identity_if_not(ok, F)
-        tangent_call(law, prm, F, C, d)
-    J[k], lo, speed[k] = health_point(F, C, rho, d)
-    lowest[k] = lo if ok else np.nan
-    return tally(k, ok, J[k], lowest[k], first, J_min, omega_min)
-
-
 def summarise(chunks, results):
     """`Health.summary` of a state from its chunks' (first bad, min J, smallest eigenvalue)
     (`parallel.rows` results, in chunk order): the first bad point of the first chunk that has
