@@ -7,6 +7,7 @@ from numba import njit
 
 from skdgmpm.materials.points import law_table, stress_tangent_point, stress_update_point, tangent_call
 
+from .dgmpm_kernels import fill_record, record_width
 from .equations import embed as _embed_point
 from .health import Health, health_point, identity_if_not, summarise, tally
 from .parallel import row_product
@@ -16,18 +17,24 @@ from .system import DIMENSION, embed
 
 
 @kernel_factory
-def _states(d, assess, gathered):       # literals: the loops unrolled, the health computed or not, U read or gathered
-    dd, nc = d * d, d * d + d
+def _states(d, assess, gathered, slots, split):     # literals: the loops unrolled, the health computed or not,
+    dd, nc = d * d, d * d + d                       # U read or gathered, the face records (slots > 0) or not
+    width = record_width(d, slots, split) if slots else 1
 
-    def states(laws, params, index, U, rho, h_n, h, Q, health, motion, gather):
+    def states(laws, params, index, U, rho, h_n, h, Q, health, motion, gather, records):
         """Each point's row copied into stack scratch: a row view (U[k], h[k]) handed to the
         inlined law would be reference counted at every point (half the time of the pass). With
         ``assess``, also the point's health (`skdgmpm.health.health_point`) at the law's tangent,
         into ``health`` = (finite, J, lowest, speed, densities of the materials), and its position
         moved with the material, x + dt (v_old + v) / 2 (trapezoidal), ``motion`` = (x, v_old,
         dt / 2, new x). With ``gathered``, each point's U is first its row of a sparse product,
-        ``gather`` = (CSR rows of the points, nodal values) (`parallel.row_product`), written into U."""
+        ``gather`` = (CSR rows of the points, nodal values) (`parallel.row_product`), written into U.
+        With ``slots`` (and ``assess``), also each point's face record at the law's tangent
+        (`skdgmpm.dgmpm_kernels.fill_record`, its ``slots`` face directions, the split part with
+        ``split``) into row row[k] of ``records`` = (rec, row, normals, record states): DGMPM with
+        one particle per cell reads its cells' records from the pass that made their states."""
         F, P, u, C = scratch((3, 3)), scratch((d, d)), scratch((nc,)), scratch((d, d, d, d))
+        n_c, r, q = scratch((max(slots, 1), d)), scratch((width,)), scratch((nc,))
         first, J_min, omega_min = -1, np.inf, np.inf
         n_h = h_n.shape[1]
         h_k_n, h_k = scratch((n_h,)), scratch((n_h,))
@@ -71,6 +78,17 @@ def _states(d, assess, gathered):       # literals: the loops unrolled, the heal
                 x, v_old, half_dt, x_new = motion
                 for i in range(x.shape[1]):
                     x_new[k, i] = x[k, i] + half_dt * (v_old[k, i] + Q[k, dd + i])
+                if slots:
+                    rec, row, normals, rec_state = records
+                    c = row[k]
+                    for s in range(slots):
+                        for i in range(d):
+                            n_c[s, i] = normals[c, s, i]
+                    for j in range(nc):
+                        q[j] = Q[k, j]
+                    rec_state[c] = 1 if fill_record(q, rho[k], C, n_c, r, d, slots, split) else 2
+                    for j in range(width):
+                        rec[c, j] = r[j]
         return first, J_min, omega_min
     return states
 
@@ -176,16 +194,18 @@ class MaterialSet:
         one compiled pass over the points (no embedded copies, masks or per-law batches)."""
         return self._update(U, index, rho, history, None)
 
-    def update_and_assess(self, U, index, rho, history, motion, gather=None):
+    def update_and_assess(self, U, index, rho, history, motion, gather=None, records=None):
         """`update`, the new state's `skdgmpm.health.Health` and the points' new positions in the
         same pass over the points (the law's tangent at F beside its stress: F embedded once, the
         state read once): (Q, history, Health, x). ``motion`` = (x (n, dim), v_old (n, dim), dt):
         the positions moved by the trapezoidal rule, x + dt (v_old + v) / 2. ``gather`` = (A CSR,
         nodal values): the points' states are A @ nodal, computed row by row in the pass and
-        written into U (the same bits as `parallel.matmul`)."""
-        return self._update(U, index, rho, history, motion, gather)
+        written into U (the same bits as `parallel.matmul`). ``records`` = (rec, row, normals,
+        record states): each point's face record also written, into row row[k] of rec (rows
+        distinct: `_states`; the width of rec says whether it holds the split part)."""
+        return self._update(U, index, rho, history, motion, gather, records)
 
-    def _update(self, U, index, rho, history, motion, gather=None):
+    def _update(self, U, index, rho, history, motion, gather=None, records=None):
         if history is None:
             history = self.initial_history(np.asarray(index)) if self.n_history else np.empty((len(U), 0))
         n, assess = len(U), motion is not None
@@ -199,7 +219,13 @@ class MaterialSet:
         else:
             moved = (np.empty((0, 1)), np.empty((0, 1)), 0.0, np.empty((0, 1)))
         d = DIMENSION[U.shape[1]]
-        (laws, params), kernel = self.laws, _states(d, assess, gather is not None)
+        if records is None:
+            slots, split = 0, False
+            records = (np.empty((0, 1)), np.zeros(0, np.int32), np.empty((0, 1, d)), np.empty(0, np.int8))
+        else:
+            slots = records[2].shape[1]
+            split = records[0].shape[1] == record_width(d, slots, True)
+        (laws, params), kernel = self.laws, _states(d, assess, gather is not None, slots, split)
         if gather is None:
             A, nodal = (np.zeros(n + 1, np.int32), np.zeros(0, np.int32), np.zeros(0)), np.zeros((0, U.shape[1]))
         else:
@@ -214,7 +240,8 @@ class MaterialSet:
                 return health, moved
         results = parallel.rows(n, lambda lo, hi: kernel(laws, params, index[lo:hi], U[lo:hi], rho[lo:hi],
                                                          history[lo:hi], h[lo:hi], Q[lo:hi], *rows(lo, hi),
-                                                         (*parallel.csr_rows(A, lo, hi), nodal)))
+                                                         (*parallel.csr_rows(A, lo, hi), nodal),
+                                                         (records[0], records[1][lo:hi], *records[2:])))
         if not assess:
             return Q, h
         finite, J, lowest, speed, _ = health

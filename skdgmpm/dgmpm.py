@@ -96,10 +96,12 @@ class DGMPM(GodunovScheme):
         self.d = g.dim
         n_cells = g.submesh.nelements
         self.cellwise = self._cellwise()
+        self._records_of = None                 # (U, Q) of the state whose cell records are kept: `_records`
         if self.cellwise:       # the particles' own arrays are the grid state: no operators kept
             self.n_dofs = n_cells * len(g.element.doflocs)
             self.point = np.empty(n_cells, dtype=np.int32)
             self.point[p.cell] = np.arange(len(p), dtype=np.int32)
+            self.point_cell = np.ascontiguousarray(p.cell, dtype=np.int32)
             self.inv_volume = 1.0 / p.volume
         else:
             # built a chunk of cells at a time: the peak of the set-up is a chunk's basis, not the grid's
@@ -173,6 +175,16 @@ class DGMPM(GodunovScheme):
         if a is None or a.shape != shape or a.dtype != np.dtype(dtype):
             a = work[name] = np.empty(shape, dtype=dtype)
         return a
+
+    def _records(self):
+        """The cell records and their states (`cell_records`): work arrays of the step. With one
+        particle per cell the step's constitutive update writes those of its new state (the law's
+        tangent at hand, no pass of their own), and ``_records_of`` = (U, Q) of the state they
+        describe once the step is accepted; `interface_flux` computes them for any other state."""
+        d, slots = self.d, self.cell_normals.shape[1]
+        n_cells = len(self.cell_dofs)
+        return (self._buffer("records", (n_cells, record_width(d, slots, self.ctu is not None))),
+                self._buffer("record states", n_cells, np.int8))
 
     # ---------------------------------------------------------------- set-up
     def _setup_cell_faces(self):
@@ -290,11 +302,12 @@ class DGMPM(GodunovScheme):
 
         dofs, normals = self.cell_dofs, self.cell_normals
         n_cells, (k_L, k_R) = len(dofs), self.local_face
-        rec = self._buffer("records", (n_cells, record_width(self.d, normals.shape[1], ctu)))
-        state = self._buffer("record states", n_cells, np.int8)
-        parallel.rows(n_cells, lambda lo, hi: cell_records(
-            dofs[lo:hi], grid_state.U, grid_state.Q, rho, self.cell_material[lo:hi], *laws, normals[lo:hi], rec[lo:hi],
-            state[lo:hi]))
+        rec, state = self._records()
+        made, self._records_of = self._records_of, None     # the buffer is rewritten from here on
+        if made is None or made[0] is not grid_state.U or made[1] is not grid_state.Q:
+            parallel.rows(n_cells, lambda lo, hi: cell_records(
+                dofs[lo:hi], grid_state.U, grid_state.Q, rho, self.cell_material[lo:hi], *laws, normals[lo:hi],
+                rec[lo:hi], state[lo:hi]))
         recorded = bool(np.all(state != 0))         # one particle per cell: the faces read no trace
         # CTU: with every cell recorded, the faces keep their fluctuations (nf, 2, nc) and each cell
         # sends the parts of those entering it (`cell_corrections`), in place; otherwise the faces
@@ -527,15 +540,20 @@ class DGMPM(GodunovScheme):
 
         def attempt(dt):
             U_nodes, work = self.advance(grid_state, state.t, dt)
-            if self.cellwise:                   # the particles' U already
-                return self.constitutive_update(state, U_nodes, dt), work
+            if self.cellwise:                   # the particles' U already; the new state's records beside it
+                rec, rec_state = self._records()
+                return self.constitutive_update(state, U_nodes, dt, records=(rec, self.point_cell, self.cell_normals,
+                                                                             rec_state)), work
             # (g) U_p = sum_i S_ip U_i [R18 eq 40] (PIC), each particle's row computed in the
             # law's pass (h): one pass over the particles, not two
             U_p = np.empty(state.U.shape)
             return self.constitutive_update(state, U_p, dt, gather=(self.map.S, U_nodes)), work
 
         try:
-            return self.step_with_cfl_guard(state, dt_max, attempt)
+            new = self.step_with_cfl_guard(state, dt_max, attempt)
+            if self.cellwise:                   # the last attempt's records: the accepted state's
+                self._records_of = (new.U, new.Q)
+            return new
         finally:
             self._kept = None       # the projected state and its terms: not held between steps
 

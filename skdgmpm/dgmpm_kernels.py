@@ -5,7 +5,8 @@ Z = sqrt(rho A_n) (and Z^-1) along the face and, for CTU, along the cell's two e
 it: its *side record* (`record_width`). A cell whose nodes all hold one state (bit for bit: one
 particle in the cell, R18's usual layout, or a uniform field) has one record for its four faces,
 computed once per right-hand side by `cell_records` (the law at the cell, the impedances along the
-cell's face directions); a side whose cell's nodes differ computes its trace's record at the face
+cell's face directions), or with one particle per cell by the law's pass that made the state
+(`fill_record`, `skdgmpm.constitutive`); a side whose cell's nodes differ computes its trace's record at the face
 (the trace gathered through its CSR row, summed in scipy's order). The records of a cell are
 computed by the same point functions as at a face (the law's `skdgmpm.materials.points`,
 `equations.impedance`): the two paths differ only in where the state is read.
@@ -119,7 +120,7 @@ def record_width(d, slots, split=True):
 
 
 @njit(cache=True, inline="always")
-def _fill_record(q, rho, C, normals, r, d, slots, split):
+def fill_record(q, rho, C, normals, r, d, slots, split):
     """The side record r of a state (q, rho) with tangent C, its impedances along the cell's face
     directions normals (slots, d), with its split part if ``split``; False where an acoustic
     tensor is not positive definite."""
@@ -244,7 +245,7 @@ def _cell_records(d, slots, nodes, split):
                 tangent_call(laws[m], params[m], F, C, d)
             else:
                 tangent_point(laws[m], params[m], F, C, d)
-            state[c] = 1 if _fill_record(q, rho[n0], C, n_c, r, d, slots, split) else 2
+            state[c] = 1 if fill_record(q, rho[n0], C, n_c, r, d, slots, split) else 2
             for k in range(width):
                 rec[c, k] = r[k]
     return cell_records
@@ -293,7 +294,7 @@ def _interior_pass(d, slots, recorded):     # literals: the loops unrolled, the 
                         tangent_call(laws[m], params[m], F, C_L, d)
                     else:
                         tangent_point(laws[m], params[m], F, C_L, d)
-                    ok_L = _fill_record(q, rho_f, C_L, normals[c_L], s_L, d, slots, ctu)     # a view: rare path
+                    ok_L = fill_record(q, rho_f, C_L, normals[c_L], s_L, d, slots, ctu)     # a view: rare path
                 else:
                     ok_L = _copy_record(rec, state, c_L, s_L)
                 if state[c_R] == 0:
@@ -303,7 +304,7 @@ def _interior_pass(d, slots, recorded):     # literals: the loops unrolled, the 
                         tangent_call(laws[m], params[m], F, C_R, d)
                     else:
                         tangent_point(laws[m], params[m], F, C_R, d)
-                    ok_R = _fill_record(q, rho_f, C_R, normals[c_R], s_R, d, slots, ctu)
+                    ok_R = fill_record(q, rho_f, C_R, normals[c_R], s_R, d, slots, ctu)
                 else:
                     ok_R = _copy_record(rec, state, c_R, s_R)
                 _record_impedance(s_L, k_L[f] % slots, Z_L, d)

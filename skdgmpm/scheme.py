@@ -225,16 +225,17 @@ class GodunovScheme:
     speed_factor = 1.0
 
     @stage
-    def constitutive_update(self, state, U, dt, gather=None):
+    def constitutive_update(self, state, U, dt, gather=None, records=None):
         """(h) P_p = P(F_p, history_p), v_p = p_p / rho0_p [R18 eq 41-42], the internal variables
         updated at the points from those of t_n (committed with the returned state); positions
         by the trapezoidal rule (second order, so displacement errors measure the scheme, not
         the position update). ``gather`` = (A, nodal): U is filled with A @ nodal in the same
-        pass (DGMPM's back map, `MaterialSet.update_and_assess`)."""
+        pass (DGMPM's back map); ``records``: the points' face records written in it too
+        (`MaterialSet.update_and_assess`)."""
         d = self.d
         Q, history, health, x = self.materials.update_and_assess(U, self.particles.material, self.particles.rho0,
                                                                  state.history, (state.x, state.Q[:, d * d:], dt),
-                                                                 gather)
+                                                                 gather, records)
         new = ParticleState(state.t + dt, U, Q, x, state.step + 1, history=history)
         self.check(new, health)
         return new

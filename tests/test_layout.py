@@ -15,6 +15,7 @@ from skdgmpm.build import build
 from skdgmpm.dgmpm import DGMPM
 from skdgmpm.errors import InputError
 from skdgmpm.scene import load_scene
+from skdgmpm.scheme import GridState
 
 CASES = {
     "impact-ctu": ("plate_impact_neohookean_2d", ["grid.cells=[12, 9]", 'method.transverse="ctu"']),
@@ -77,3 +78,28 @@ def test_a_particle_on_a_cell_edge_is_not_cellwise_and_one_clear_error():
 def test_unknown_layout_is_one_clear_error():
     with pytest.raises(InputError, match="method.layout"):
         build(load_scene("bar_elastic_1d", ["grid.cells=[10]", 'method.layout="cells"']))
+
+
+@pytest.mark.parametrize("case", ["impact-ctu", "impact-dcu", "bar-1d", "j2-ctu"])
+def test_records_of_the_constitutive_update_are_those_of_the_record_pass(case):
+    """With one particle per cell the step's constitutive update writes the new state's cell
+    records (the law's tangent at hand) and the next step reads them instead of its own record
+    pass: they must be that pass's bits (`dgmpm_kernels.cell_records`, the independent path a
+    state without kept records takes), and a state stepped from elsewhere (not the last result)
+    must not read them."""
+    name, overrides = CASES[case]
+    disc = build(load_scene(name, overrides))
+    st, state = disc.stepper, disc.initial
+    for _ in range(6):
+        state = st.step(state)
+    assert st._records_of[0] is state.U and st._records_of[1] is state.Q
+    kept = tuple(a.copy() for a in st._records())
+    st._records_of = None                   # what a state without kept records gets
+    st.interface_flux(GridState(state.U, state.Q))
+    for a, b in zip(kept, st._records()):
+        np.testing.assert_array_equal(a, b)
+    fresh = build(load_scene(name, overrides)).stepper     # the same guard state: the same Delta t
+    fresh.dt_trend, fresh.dt_recent = st.dt_trend, st.dt_recent
+    again = st.step(disc.initial)           # stepped from the initial state: its own records
+    other = fresh.step(disc.initial)
+    assert again.t == other.t and np.array_equal(again.Q, other.Q)
