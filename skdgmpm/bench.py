@@ -84,7 +84,10 @@ def _measure(method, n, steps, warmup, threads=1):
             times.append(time.perf_counter() - t0)
             cpu.append(time.process_time() - c0)
     step = statistics.median(times)
-    per_stage = {name: seconds / steps for name, (seconds, _) in stepper.stage_times().items()}
+    clock = stepper.stage_times()
+    per_stage = {name: seconds / steps for name, (seconds, _) in clock.items()}
+    # the CFL guard's repeated attempts: the median step hides them, the mean step includes them
+    attempts = clock["check"][1] / steps if "check" in clock else None
     cells = int(stepper.grid.submesh.nelements)
     dofs = len(disc.particles) if method.startswith("mpm") else int(stepper.n_dofs)
     stages = EVALUATIONS.get(stepper.integrator, 1)
@@ -96,6 +99,7 @@ def _measure(method, n, steps, warmup, threads=1):
             "s_per_dof_stage": step / dofs / stages, "particles_per_s": len(disc.particles) / step,
             "peak_MiB": peak / 1024, "peak_over_base_MiB": (peak - base_rss) / 1024,
             "bytes_per_cell": 1024 * (peak - base_rss) / cells,
+            "step_mean_s": statistics.mean(times), "attempts_per_step": attempts,
             "stage_s": per_stage}                   # mean wall time per step of each stage (its own)
 
 
@@ -154,6 +158,9 @@ def format_stages(rows):
             continue
         total = sum(stages.values())
         parts = ", ".join(f"{name} {1e3 * s:.2f} ms ({100 * s / total:.0f}%)" for name, s in stages.items())
+        if r.get("attempts_per_step"):
+            parts += (f"; {r['attempts_per_step']:.2f} attempts per step (CFL guard), mean step "
+                      f"{1e3 * r['step_mean_s']:.2f} ms")
         lines.append(f"{r['method']} {r['cells']} cells, {r.get('threads', 1)} thread(s): {parts}")
     return "\n".join(lines)
 

@@ -16,6 +16,9 @@ def test_bench_command_prints_table_and_writes_json(tmp_path, capsys):
     row = data["rows"][0]
     assert row["cells"] == 64 and row["dofs"] == 4 * 64 and row["step_s"] > 0 and row["peak_MiB"] > 0
     assert row["cpu_us_per_cell_step"] > 0 and row["startup_s"] > 0
+    # one health check per attempt of the CFL guard: at least one per step, a repeat adds one
+    assert all(r["attempts_per_step"] >= 1 and r["step_mean_s"] > 0 for r in data["rows"])
+    assert "attempts per step (CFL guard)" in text
 
 
 def test_bench_measures_each_thread_count(tmp_path, capsys):
