@@ -357,7 +357,8 @@ class ADERDGFEM(DGFEM):
         """Picard iterations of L23 eq 62 on per-cell values U (nel, n, nc) at t_n, with the law
         ``law`` on (..., nel, n, nc) arrays, the predictor's derivative matrices D and those of the
         Taylor guess D_taylor (d, nel, n, n), the source (P+1, nel, n, nc) or None, and Q = law(U)
-        when the caller knows it. Returns (u_hat, q_hat), (P+1, nel, n, nc)."""
+        when the caller knows it. Returns (u_hat, q_hat), (P+1, nel, n, nc): q_hat the law at the
+        last iterate before u_hat."""
         U = np.ascontiguousarray(U)
         d, n_t = self.d, len(self.tau)
         scale = _block_scale(U.reshape(-1, U.shape[-1]), d * d)     # change measured per block (F, p)
@@ -378,12 +379,17 @@ class ADERDGFEM(DGFEM):
         U0 = U[None] if source is None else U[None] + dt * np.tensordot(self.T_tau, source, axes=1)
         U0 = flat(np.ascontiguousarray(U0))
         for it in range(1, self.picard_max + 1):
-            change = _picard_step(law(u_hat), D, U0, self.T_tau, dt, scale, flat(u_hat), flat(new))
+            q_hat = None                    # the last iterate's law freed before the next is made
+            q_hat = law(u_hat)
+            change = _picard_step(q_hat, D, U0, self.T_tau, dt, scale, flat(u_hat), flat(new))
             u_hat, new = new, u_hat
             if change <= self.picard_tol:
                 break
         self.picard.add(it, change <= self.picard_tol)
-        return u_hat, law(u_hat)
+        # q_hat: the law of the last iterate, whose fluxes made u_hat (u_hat = U0 - dt T DIV F(q_hat)
+        # exactly; law(u_hat) within the tolerance): the corrector integrates the fluxes of the
+        # predictor it was given, and no law is evaluated once more at every point and time node
+        return u_hat, q_hat
 
     # ---------------------------------------------------------------- corrector
     @stage
