@@ -7,7 +7,7 @@ from numba import njit
 
 from skdgmpm.materials.points import law_table, stress_tangent_point, stress_update_point, tangent_call
 
-from .dgmpm_kernels import fill_record, record_width
+from .dgmpm_kernels import record_width, write_record
 from .equations import embed as _embed_point
 from .health import Health, health_point, identity_if_not, summarise, tally
 from .parallel import row_product
@@ -30,7 +30,7 @@ def _states(d, assess, gathered, slots, split):     # literals: the loops unroll
         dt / 2, new x). With ``gathered``, each point's U is first its row of a sparse product,
         ``gather`` = (CSR rows of the points, nodal values) (`parallel.row_product`), written into U.
         With ``slots`` (and ``assess``), also each point's face record at the law's tangent
-        (`skdgmpm.dgmpm_kernels.fill_record`, its ``slots`` face directions, the split part with
+        (`skdgmpm.dgmpm_kernels.write_record`, its ``slots`` face directions, the split part with
         ``split``) into row row[k] of ``records`` = (rec, row, normals, record states): DGMPM with
         one particle per cell reads its cells' records from the pass that made their states."""
         F, P, u, C = scratch((3, 3)), scratch((d, d)), scratch((nc,)), scratch((d, d, d, d))
@@ -80,15 +80,9 @@ def _states(d, assess, gathered, slots, split):     # literals: the loops unroll
                     x_new[k, i] = x[k, i] + half_dt * (v_old[k, i] + Q[k, dd + i])
                 if slots:
                     rec, row, normals, rec_state = records
-                    c = row[k]
-                    for s in range(slots):
-                        for i in range(d):
-                            n_c[s, i] = normals[c, s, i]
                     for j in range(nc):
                         q[j] = Q[k, j]
-                    rec_state[c] = 1 if fill_record(q, rho[k], C, n_c, r, d, slots, split) else 2
-                    for j in range(width):
-                        rec[c, j] = r[j]
+                    write_record(q, rho[k], C, normals, row[k], rec, rec_state, n_c, r, d, slots, split)
         return first, J_min, omega_min
     return states
 

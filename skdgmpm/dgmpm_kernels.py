@@ -6,7 +6,7 @@ it: its *side record* (`record_width`). A cell whose nodes all hold one state (b
 particle in the cell, R18's usual layout, or a uniform field) has one record for its four faces,
 computed once per right-hand side by `cell_records` (the law at the cell, the impedances along the
 cell's face directions), or with one particle per cell by the law's pass that made the state
-(`fill_record`, `skdgmpm.constitutive`); a side whose cell's nodes differ computes its trace's record at the face
+(`write_record`, `skdgmpm.constitutive`); a side whose cell's nodes differ computes its trace's record at the face
 (the trace gathered through its CSR row, summed in scipy's order). The records of a cell are
 computed by the same point functions as at a face (the law's `skdgmpm.materials.points`,
 `equations.impedance`): the two paths differ only in where the state is read.
@@ -153,6 +153,20 @@ def fill_record(q, rho, C, normals, r, d, slots, split):
 
 
 @njit(cache=True, inline="always")
+def write_record(q, rho, C, normals, c, rec, state, n_c, r, d, slots, split):
+    """The side record of cell c (`fill_record`, the cell's face directions normals[c]) into row c
+    of rec, and its record state: 1, or 2 where an acoustic tensor is not positive definite
+    (`cell_records`, and the law's pass with one particle per cell, `skdgmpm.constitutive`).
+    n_c (slots, d) and r (record width) are stack scratch (rows copied, never viewed)."""
+    for s in range(slots):
+        for i in range(d):
+            n_c[s, i] = normals[c, s, i]
+    state[c] = 1 if fill_record(q, rho, C, n_c, r, d, slots, split) else 2
+    for k in range(rec.shape[1]):
+        rec[c, k] = r[k]
+
+
+@njit(cache=True, inline="always")
 def _copy_record(rec, state, c, r):
     """Row c of the cell records into the side record r (stack scratch: no array view, whose
     reference counting would cost more than the copy); whether it is admissible."""
@@ -236,18 +250,13 @@ def _cell_records(d, slots, nodes, split):
                 continue
             for j in range(nc):
                 u[j], q[j] = U[n0, j], Q[n0, j]
-            for s in range(slots):
-                for i in range(d):
-                    n_c[s, i] = normals[c, s, i]
             embed(u, F, d)
             m = cell_material[c]
             if d == 1:
                 tangent_call(laws[m], params[m], F, C, d)
             else:
                 tangent_point(laws[m], params[m], F, C, d)
-            state[c] = 1 if fill_record(q, rho[n0], C, n_c, r, d, slots, split) else 2
-            for k in range(width):
-                rec[c, k] = r[k]
+            write_record(q, rho[n0], C, normals, c, rec, state, n_c, r, d, slots, split)
     return cell_records
 
 
