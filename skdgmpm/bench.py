@@ -24,6 +24,8 @@ import resource
 import statistics
 import time
 
+import numpy as np
+
 from . import peer
 from .errors import InputError
 from .integrators import EVALUATIONS
@@ -127,6 +129,42 @@ def measure(method, n, steps=5, warmup=2, threads=1):
     return row
 
 
+def memory_bandwidth(threads, mib=64, repeats=5):
+    """GB/s of the triad out = x + a y (`parallel.add_scaled`, three arrays of ``mib`` MiB: read
+    two, write one) on each thread count, best of ``repeats``: what a pass bound by memory can
+    gain from more threads on this machine (arithmetic scales with the cores, bandwidth may not)."""
+    from . import parallel
+
+    n = mib * 2 ** 20 // 8
+    x, y, out = (np.full((n // 64, 64), v) for v in (1.0, 1.0, 0.0))       # rows of 64: a vector loop
+    previous, speeds = parallel.set_threads(1), {}
+    try:
+        for t in threads:
+            parallel.set_threads(t)
+            parallel.add_scaled(x, 2.5, y, out)             # compiled, pages touched
+            best = min(_timed(lambda: parallel.add_scaled(x, 2.5, y, out)) for _ in range(repeats))
+            speeds[t] = 3 * 8 * n / best / 1e9
+    finally:
+        parallel.set_threads(previous)
+    return speeds
+
+
+def _timed(call):
+    t0 = time.perf_counter()
+    call()
+    return time.perf_counter() - t0
+
+
+def format_memory(speeds, mib=64):
+    """One line: the triad's GB/s per thread count and its speed-up over one thread."""
+    if len(speeds) < 2 or 1 not in speeds:
+        return ""
+    parts = ", ".join(f"{t} thread{'s' if t > 1 else ''} {g:.1f} GB/s (x{g / speeds[1]:.2f})"
+                      for t, g in sorted(speeds.items()))
+    return (f"memory (x + a y, 3 x {mib} MiB): {parts}: a pass bound by memory speeds up at most about that "
+            "much; arithmetic scales with the cores")
+
+
 def machine():
     return {"machine": platform.machine(), "processor": platform.processor() or platform.machine(),
             "cpus": os.cpu_count(), "python": platform.python_version(),
@@ -182,9 +220,10 @@ def format_scaling(rows):
     return "\n".join(lines)
 
 
-def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threads=(1,)):
-    """Run every (method, size, thread count); print the table; write JSON if asked. Returns the
-    rows. The CPU time per cell of a one-thread row is the cost per core."""
+def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threads=(1,), memory_mib=64):
+    """Run every (method, size, thread count); write JSON if asked. Returns the rows and, with
+    several thread counts, the memory bandwidth on each (`memory_bandwidth`, else {}). The CPU
+    time per cell of a one-thread row is the cost per core."""
     from .run import progress_bar
 
     rows = []
@@ -199,7 +238,9 @@ def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threa
                 rows.append(measure(method, n, steps, warmup, t))
                 bar.update()
     bar.close()
+    memory = memory_bandwidth(threads, memory_mib) if len(threads) > 1 else {}
     if json_path is not None:
+        info = {**machine(), "memory_GBps": {str(t): g for t, g in memory.items()}, "memory_MiB": memory_mib}
         with open(json_path, "w") as fh:
-            json.dump({"machine": machine(), "steps": steps, "warmup": warmup, "rows": rows}, fh, indent=1)
-    return rows
+            json.dump({"machine": info, "steps": steps, "warmup": warmup, "rows": rows}, fh, indent=1)
+    return rows, memory

@@ -152,8 +152,8 @@ def _cmd_bench(args):
     sizes = study._int_list(args.sizes, "--sizes")
     cores = parallel.available()
     threads = study._int_list(args.threads, "--threads") if args.threads else sorted({1, cores})
-    rows = bench.main(methods, sizes, steps=args.steps, warmup=args.warmup, json_path=args.json,
-                      progress=not args.quiet, threads=threads)
+    rows, memory = bench.main(methods, sizes, steps=args.steps, warmup=args.warmup, json_path=args.json,
+                              progress=not args.quiet, threads=threads)
     m = bench.machine()
     print(f"{m['processor']}, {m['cpus']} CPUs, Python {m['python']}")
     print(bench.format_table(rows))
@@ -161,6 +161,7 @@ def _cmd_bench(args):
     scaling = bench.format_scaling(rows)
     if scaling:
         print("\nthreads (wall time per step, speed-up over one thread):\n" + scaling)
+        print(bench.format_memory(memory))
     ratio = peer.format_ratio(rows)
     if ratio:
         print("\nours / peer (CPU time per cell and step, one core):\n" + ratio)

@@ -106,11 +106,11 @@ def first_bad(n, call):
     return -1
 
 
-def add_scaled(x, a, y):
+def add_scaled(x, a, y, out=None):
     """x + a * y for arrays of one shape (n, ...) and a scalar a, rows in parallel chunks: entry
     by entry numpy's operations (a * y, then the sum), the same bits; x and y may be strided
-    views (a column block of a state array)."""
-    out = np.empty(x.shape)
+    views (a column block of a state array); into ``out`` (contiguous) if given."""
+    out = np.empty(x.shape) if out is None else out
     x2, y2, out2 = x.reshape(len(x), -1), y.reshape(len(y), -1), out.reshape(len(out), -1)
     rows(len(out), lambda lo, hi: _add_scaled(x2[lo:hi], float(a), y2[lo:hi], out2[lo:hi]))
     return out
