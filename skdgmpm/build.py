@@ -194,16 +194,17 @@ def build(scene):
         if not 1 <= order <= 5:
             raise InputError(f"{scene.where('method.order')} = {order!r} must be in 1..5")
         cell_material = cell_values("materials", particles.cell, particles.material, grid.submesh.nelements)
+        picard = _picard_options(scene, method) if name.startswith("ader") else {}
         if name == "rk-dgfem":
             stepper = DGFEM(grid, mats, bcs, cell_material, order=order, cfl=cfl,
                             integrator=method.get("integrator", "rk2"), limiter=method.get("limiter", "none"))
         elif name == "ader-dgfem":
             stepper = ADERDGFEM(grid, mats, bcs, cell_material, order=order, cfl=cfl,
-                                limiter=method.get("limiter", "none"))
+                                limiter=method.get("limiter", "none"), **picard)
         else:
             stepper = ADERDGMPM(grid, mats, bcs, cell_material, order=order, cfl=cfl, particles_in=particles,
                                 mls_order=method.get("mls_order", -1), backmap=method.get("backmap", "pic"),
-                                limiter=method.get("limiter", "none"))
+                                limiter=method.get("limiter", "none"), **picard)
     grid.release_caches()                   # the operators are assembled: memory back
     guard = method.get("cfl_guard", "predict")
     if guard not in ("predict", "largest"):
@@ -255,6 +256,24 @@ def build(scene):
     release_free_pages()                    # the set-up's freed temporaries: not resident under the step's peak
     return Discretisation(scene, grid, stepper.particles, layout if name == "dgmpm" else None,
                           stepper, initial)
+
+
+def _picard_options(scene, method):
+    """ADER's Picard controls from the scene (`method.picard_max`, `method.picard_tol`), checked;
+    the stepper's defaults where absent (2P + 2 iterations, 1e-12)."""
+    options = {}
+    if "picard_max" in method:
+        if method["picard_max"] < 1:
+            raise InputError(f"{scene.where('method.picard_max')} = {method['picard_max']!r} must be >= 1 "
+                             "(Picard iterations of the ADER predictor per step)")
+        options["picard_max"] = int(method["picard_max"])
+    if "picard_tol" in method:
+        tol = float(method["picard_tol"])
+        if not tol >= 0:
+            raise InputError(f"{scene.where('method.picard_tol')} = {method['picard_tol']!r} must be >= 0 (a "
+                             "relative change of the predictor)")
+        options["picard_tol"] = tol
+    return options
 
 
 def _region_cells(scene, mesh, k, region):

@@ -163,6 +163,13 @@ KEYS = (
         methods=("ader-dgmpm",)),
     Key("method.backmap", "", '"pic"', '"flip"', "pic | flip: how the grid update reaches the particles",
         methods=("ader-dgmpm",)),
+    Key("method.picard_max", "", "2P + 2", "3",
+        "ADER predictor: at most this many Picard iterations per step (>= 1; fewer than the default may "
+        "stop the predictor before it converges, docs/choices.md); the run's summary counts them",
+        methods=("ader-dgfem", "ader-dgmpm")),
+    Key("method.picard_tol", "", "1e-12", "1e-10",
+        "ADER predictor: stop the Picard iterations when the change is below this fraction of the F and "
+        "p blocks' size (>= 0; 0: always run method.picard_max)", methods=("ader-dgfem", "ader-dgmpm")),
     Key("method.limiter", "", '"none"', '"barth-jespersen"',
         "none | barth-jespersen | venkatakrishnan, each also -invariant, -scaled, -invariant-scaled "
         "(L23 eq 41-43; docs/choices.md)", methods=HIGH_ORDER),

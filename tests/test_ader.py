@@ -4,6 +4,7 @@ import pytest
 
 from skdgmpm.ader import time_matrices
 from skdgmpm.build import build
+from skdgmpm.errors import InputError
 from skdgmpm.run import run
 from skdgmpm.scene import load_scene
 
@@ -166,3 +167,25 @@ def test_ader_dgmpm_with_shepard_functions_is_first_order_dgmpm(scene, extra):
     fa, fb = a.fields(), b.fields()
     for field in ("P11", "v1"):
         assert np.abs(fa[field] - fb[field]).max() < 1e-10 * np.abs(fa[field]).max()
+
+
+def test_picard_keys_reach_the_predictor_and_bad_values_name_the_key():
+    """method.picard_max and method.picard_tol set the predictor's cap and tolerance (2P + 2 and
+    1e-12 without them), for ADER-DGFEM and ADER-DGMPM; with a zero tolerance every step runs
+    the cap, never more; a value out of range is a one-line error that names the key."""
+    base = ["grid.cells=[8, 6]", "method.order=1", "method.cfl=0.4"]
+    dgfem = [*base, 'method.name="ader-dgfem"']
+    st = build(load_scene("plate_impact_neohookean_2d", dgfem)).stepper
+    assert (st.picard_max, st.picard_tol) == (4, 1e-12)
+    disc = build(load_scene("plate_impact_neohookean_2d", [*dgfem, "method.picard_max=2", "method.picard_tol=0"]))
+    st, state = disc.stepper, disc.initial
+    assert (st.picard_max, st.picard_tol) == (2, 0.0)
+    for _ in range(3):
+        state = st.step(state)
+    assert st.picard.max == 2 and st.picard.total == 2 * st.picard.steps
+    mpm = build(load_scene("plate_impact_neohookean_2d", [*base, 'method.name="ader-dgmpm"', "particles.per_cell=2",
+                                                          "method.picard_max=3", "method.picard_tol=1e-10"])).stepper
+    assert (mpm.picard_max, mpm.picard_tol) == (3, 1e-10)
+    for key, value in (("picard_max", "0"), ("picard_tol", "-1e-3")):
+        with pytest.raises(InputError, match=f"method.{key} = "):
+            build(load_scene("plate_impact_neohookean_2d", [*dgfem, f"method.{key}={value}"]))
