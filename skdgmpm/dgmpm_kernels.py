@@ -162,7 +162,9 @@ def write_record(q, rho, C, normals, c, rec, state, n_c, r, d, slots, split):
         for i in range(d):
             n_c[s, i] = normals[c, s, i]
     state[c] = 1 if fill_record(q, rho, C, n_c, r, d, slots, split) else 2
-    for k in range(rec.shape[1]):
+    # the width from the literals (`record_width`), not rec.shape[1]: the copy unrolls
+    width = _inverse_impedance_at(d, slots, slots) if split else _inv_rho_at(d, slots)
+    for k in range(width):
         rec[c, k] = r[k]
 
 
