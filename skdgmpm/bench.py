@@ -129,7 +129,10 @@ def measure(method, n, steps=5, warmup=2, threads=1):
     return row
 
 
-def memory_bandwidth(threads, mib=64, repeats=5):
+MEMORY_MIB = 64            # each array of the memory probe: far past the caches
+
+
+def memory_bandwidth(threads, mib=MEMORY_MIB, repeats=5):
     """GB/s of the triad out = x + a y (`parallel.add_scaled`, three arrays of ``mib`` MiB: read
     two, write one) on each thread count, best of ``repeats``: what a pass bound by memory can
     gain from more threads on this machine (arithmetic scales with the cores, bandwidth may not)."""
@@ -155,7 +158,7 @@ def _timed(call):
     return time.perf_counter() - t0
 
 
-def format_memory(speeds, mib=64):
+def format_memory(speeds, mib=MEMORY_MIB):
     """One line: the triad's GB/s per thread count and its speed-up over one thread."""
     if len(speeds) < 2 or 1 not in speeds:
         return ""
@@ -220,7 +223,7 @@ def format_scaling(rows):
     return "\n".join(lines)
 
 
-def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threads=(1,), memory_mib=64):
+def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threads=(1,)):
     """Run every (method, size, thread count); write JSON if asked. Returns the rows and, with
     several thread counts, the memory bandwidth on each (`memory_bandwidth`, else {}). The CPU
     time per cell of a one-thread row is the cost per core."""
@@ -238,9 +241,9 @@ def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threa
                 rows.append(measure(method, n, steps, warmup, t))
                 bar.update()
     bar.close()
-    memory = memory_bandwidth(threads, memory_mib) if len(threads) > 1 else {}
+    memory = memory_bandwidth(threads) if len(threads) > 1 else {}
     if json_path is not None:
-        info = {**machine(), "memory_GBps": {str(t): g for t, g in memory.items()}, "memory_MiB": memory_mib}
+        info = {**machine(), "memory_GBps": {str(t): g for t, g in memory.items()}, "memory_MiB": MEMORY_MIB}
         with open(json_path, "w") as fh:
             json.dump({"machine": info, "steps": steps, "warmup": warmup, "rows": rows}, fh, indent=1)
     return rows, memory
