@@ -34,7 +34,7 @@ from numba import njit
 
 from skdgmpm.materials.points import tangent_call, tangent_point
 
-from .equations import add_normal_flux, ctu_parts, ctu_split, embed, fluctuations, godunov, impedance, traction
+from .equations import add_normal_flux, ctu_parts, ctu_parts_opposite, ctu_split, embed, fluctuations, godunov, impedance, traction
 from .faces import gather_row
 from .kernel_cache import kernel_factory, scratch
 from .system import DIMENSION, volume_row
@@ -352,9 +352,13 @@ def _split_into(w, C, r, k, topo, f, G, part, slots):
     side of face f, local face k of the side's cell with record r: its parts for the cell's two
     edges adjacent to the face (local faces k + 1, k + 3) into G[f, part] and G[f, part + 1]."""
     h, normals = topo
-    G_0, G_1 = ctu_parts(w, C, r[_inv_rho_at(2, slots)], -1.0 / (2.0 * h[f]), normals[f, 0, 0], normals[f, 0, 1],
-                         normals[f, 1, 0], normals[f, 1, 1], _record_pair(r, slots, _edge_slot(k, 0, slots)),
-                         _record_pair(r, slots, _edge_slot(k, 1, slots)))
+    if slots == 2:                      # the two edges are opposite (parallel pairs): one impedance
+        G_0, G_1 = ctu_parts_opposite(w, C, r[_inv_rho_at(2, slots)], -1.0 / (2.0 * h[f]), normals[f, 0, 0],
+                                      normals[f, 0, 1], _record_pair(r, slots, _edge_slot(k, 0, slots)))
+    else:
+        G_0, G_1 = ctu_parts(w, C, r[_inv_rho_at(2, slots)], -1.0 / (2.0 * h[f]), normals[f, 0, 0], normals[f, 0, 1],
+                             normals[f, 1, 0], normals[f, 1, 1], _record_pair(r, slots, _edge_slot(k, 0, slots)),
+                             _record_pair(r, slots, _edge_slot(k, 1, slots)))
     for c in range(6):
         G[f, part, c] = G_0[c]
         G[f, part + 1, c] = G_1[c]
@@ -398,8 +402,12 @@ def _cell_corrections(slots):
             for e in range(2):                  # edges e, e + 2 <- faces e + 1, e + 3
                 for i in range(6):
                     S[i] = w[e + 1, i] + w[(e + 3) % 4, i]
-                G_a, G_b = ctu_parts(S, C, r[_inv_rho_at(2, slots)], 1.0, n[e, 0], n[e, 1], n[e + 2, 0], n[e + 2, 1],
-                                     _record_pair(r, slots, e % slots), _record_pair(r, slots, (e + 2) % slots))
+                if slots == 2:              # edges e, e + 2 opposite (parallel pairs): one impedance
+                    G_a, G_b = ctu_parts_opposite(S, C, r[_inv_rho_at(2, slots)], 1.0, n[e, 0], n[e, 1],
+                                                  _record_pair(r, slots, e))
+                else:
+                    G_a, G_b = ctu_parts(S, C, r[_inv_rho_at(2, slots)], 1.0, n[e, 0], n[e, 1], n[e + 2, 0],
+                                         n[e + 2, 1], _record_pair(r, slots, e), _record_pair(r, slots, e + 2))
                 for q in range(2):
                     s = sources[c, e + 2 * q]
                     for i in range(6):

@@ -236,14 +236,32 @@ def _edge_split(w, m, n0, n1, inv_rho, scale, Z):
     6-tuple, given m = C : w_F and Z = (sqrt(rho A_n), its inverse) as an 8-tuple. Decomposing w on
     the eigenvectors r_k = [Y_k (x) n ; -rho c_k Y_k] of d F_n / dU [R18 eq 35-36] gives, with
     g = (C : w_F) n,  B+ w = [(Z^-1 g - w_p / rho) / 2 (x) n ;  -g / 2 + Z w_p / (2 rho)]."""
+    g0, g1 = _traction_change(m, n0, n1)
+    return _edge_part(_edge_terms(w, g0, g1, inv_rho, Z), g0, g1, n0, n1, scale)
+
+
+@njit(cache=True, inline="always")
+def _traction_change(m, n0, n1):
+    """g = (C : w_F) n along an edge normal n, given m = C : w_F (row-major 4-tuple)."""
+    return 0.0 + m[0] * n0 + m[1] * n1, 0.0 + m[2] * n0 + m[3] * n1
+
+
+@njit(cache=True, inline="always")
+def _edge_terms(w, g0, g1, inv_rho, Z):
+    """What B+_n w is made of besides g and n (`_edge_split`): Z^-1 g, w_p / rho, Z w_p / (2 rho)."""
     z00, z01, z10, z11, i00, i01, i10, i11 = Z
-    g0 = 0.0 + m[0] * n0 + m[1] * n1                     # g = (C : w_F) n
-    g1 = 0.0 + m[2] * n0 + m[3] * n1
-    a0 = 0.5 * ((i00 * g0 + i01 * g1) - w[4] * inv_rho)
-    a1 = 0.5 * ((i10 * g0 + i11 * g1) - w[5] * inv_rho)
+    return (i00 * g0 + i01 * g1, i10 * g0 + i11 * g1, w[4] * inv_rho, w[5] * inv_rho,
+            0.5 * (z00 * w[4] + z01 * w[5]) * inv_rho, 0.5 * (z10 * w[4] + z11 * w[5]) * inv_rho)
+
+
+@njit(cache=True, inline="always")
+def _edge_part(terms, g0, g1, n0, n1, scale):
+    """scale B+_n w as a 6-tuple from `_edge_terms`, g and n."""
+    x0, x1, y0, y1, zw0, zw1 = terms
+    a0 = 0.5 * (x0 - y0)
+    a1 = 0.5 * (x1 - y1)
     return (scale * (a0 * n0), scale * (a0 * n1), scale * (a1 * n0), scale * (a1 * n1),
-            scale * (-0.5 * g0 + 0.5 * (z00 * w[4] + z01 * w[5]) * inv_rho),
-            scale * (-0.5 * g1 + 0.5 * (z10 * w[4] + z11 * w[5]) * inv_rho))
+            scale * (-0.5 * g0 + zw0), scale * (-0.5 * g1 + zw1))
 
 
 @njit(cache=True, inline="always")
@@ -264,10 +282,12 @@ def ctu_split(w, C, rho, scale, a0, a1, b0, b1):
     registers); ok False where an acoustic tensor is not positive definite. Two opposite edges
     share one impedance (A_n is quadratic in n)."""
     ok, Z = _edge_impedance(C, rho, a0, a1)
-    if ok and not (b0 == -a0 and b1 == -a1):
+    if b0 == -a0 and b1 == -a1:
+        G_0, G_1 = ctu_parts_opposite(w, C, 1.0 / rho, scale, a0, a1, Z)
+        return ok, G_0, G_1
+    Z_b = Z
+    if ok:
         ok, Z_b = _edge_impedance(C, rho, b0, b1)
-    else:
-        Z_b = Z
     G_0, G_1 = ctu_parts(w, C, 1.0 / rho, scale, a0, a1, b0, b1, Z, Z_b)
     return ok, G_0, G_1
 
@@ -279,6 +299,18 @@ def ctu_parts(w, C, inv_rho, scale, a0, a1, b0, b1, Z_a, Z_b):
     uniform, `skdgmpm.dgmpm_kernels`): (G_0, G_1)."""
     m = _stress_change(C, w)
     return _edge_split(w, m, a0, a1, inv_rho, scale, Z_a), _edge_split(w, m, b0, b1, inv_rho, scale, Z_b)
+
+
+@njit(cache=True, inline="always")
+def ctu_parts_opposite(w, C, inv_rho, scale, a0, a1, Z):
+    """`ctu_parts` for two opposite edges, normals a and -a (a parallelogram's), which share Z:
+    the second edge's g and Z^-1 g are the first's negated, so its part costs a few additions
+    (the same numbers as `ctu_parts` with b = -a and Z_b = Z, up to the sign of a zero)."""
+    m = _stress_change(C, w)
+    g0, g1 = _traction_change(m, a0, a1)
+    x0, x1, y0, y1, zw0, zw1 = _edge_terms(w, g0, g1, inv_rho, Z)
+    return (_edge_part((x0, x1, y0, y1, zw0, zw1), g0, g1, a0, a1, scale),
+            _edge_part((-x0, -x1, y0, y1, zw0, zw1), -g0, -g1, -a0, -a1, scale))
 
 
 @njit(cache=True, inline="always")
