@@ -269,13 +269,22 @@ class PicardStats:
         return self.total / max(self.steps, 1)
 
 
+def default_picard_max(order, d):
+    """The predictor's default cap on Picard iterations: dP + 1, at least P + 2. For a linear
+    problem the iteration is exact after dP iterations from the constant guess (P in 1D, 2P on 2D
+    tensor spaces: tests/test_ader.py) and the next one confirms it (L23's P + 1 in 1D); on a
+    nonlinear impact the cap, not the tolerance, ends the iterations, and the errors against the
+    manufactured solution do not change beyond it (docs/choices.md)."""
+    return max(d * order + 1, order + 2)
+
+
 @dataclass
 class ADERDGFEM(DGFEM):
     """ADER-DGFEM of order P in space and time (SPTP). ``integrator`` is "ader"."""
 
     integrator: str = "ader"
     picard_tol: float = 1e-12
-    picard_max: int = 0                     # 0: 2P + 2
+    picard_max: int = 0                     # 0: `default_picard_max`
     picard_guess: str = "taylor"            # or "constant" (u_hat = U^n at every time node)
     stages: tuple = ("time_step", "advance", "predictor", "corrector", "surface_integral", "boundary_states",
                      "source", "limit", "evaluate_points", "check")
@@ -293,7 +302,7 @@ class ADERDGFEM(DGFEM):
         self.nq = nq
         self._repeated = {}
         if not self.picard_max:
-            self.picard_max = 2 * self.order + 2
+            self.picard_max = default_picard_max(self.order, self.d)
         # the corrector's operators from the predictor's points (here the Gauss points) to the
         # facet rows and to the volume term, built once: point values -> coefficients -> traces
         shape = (nel, self.nb, nq)

@@ -260,7 +260,7 @@ def build(scene):
 
 def _picard_options(scene, method):
     """ADER's Picard controls from the scene (`method.picard_max`, `method.picard_tol`), checked;
-    the stepper's defaults where absent (2P + 2 iterations, 1e-12)."""
+    the stepper's defaults where absent (`ader.default_picard_max` iterations, 1e-12)."""
     options = {}
     if "picard_max" in method:
         if method["picard_max"] < 1:

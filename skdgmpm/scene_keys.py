@@ -163,7 +163,7 @@ KEYS = (
         methods=("ader-dgmpm",)),
     Key("method.backmap", "", '"pic"', '"flip"', "pic | flip: how the grid update reaches the particles",
         methods=("ader-dgmpm",)),
-    Key("method.picard_max", "", "2P + 2", "3",
+    Key("method.picard_max", "", "dP + 1, >= P + 2", "3",
         "ADER predictor: at most this many Picard iterations per step (>= 1; fewer than the default may "
         "stop the predictor before it converges, docs/choices.md); the run's summary counts them",
         methods=("ader-dgfem", "ader-dgmpm")),

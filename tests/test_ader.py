@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from skdgmpm.ader import time_matrices
+from skdgmpm.ader import default_picard_max, time_matrices
 from skdgmpm.build import build
 from skdgmpm.errors import InputError
 from skdgmpm.run import run
@@ -57,6 +57,7 @@ def test_picard_is_exact_after_the_nilpotency_index_for_a_linear_problem(scene, 
         st.picard_max = n
         return st.predictor(U, dt)[0]
 
+    assert default_picard_max(order, d) >= index(order) + 1     # the default cap confirms exactness
     st.picard_max = 4 * order + 4
     exact = st.predictor(U, dt)[0]
     scale = np.abs(exact).max(axis=(0, 1, 2))
@@ -170,13 +171,14 @@ def test_ader_dgmpm_with_shepard_functions_is_first_order_dgmpm(scene, extra):
 
 
 def test_picard_keys_reach_the_predictor_and_bad_values_name_the_key():
-    """method.picard_max and method.picard_tol set the predictor's cap and tolerance (2P + 2 and
-    1e-12 without them), for ADER-DGFEM and ADER-DGMPM; with a zero tolerance every step runs
-    the cap, never more; a value out of range is a one-line error that names the key."""
+    """method.picard_max and method.picard_tol set the predictor's cap and tolerance (dP + 1, at
+    least P + 2, and 1e-12 without them), for ADER-DGFEM and ADER-DGMPM; with a zero tolerance
+    every step runs the cap, never more; a value out of range is a one-line error that names the
+    key."""
     base = ["grid.cells=[8, 6]", "method.order=1", "method.cfl=0.4"]
     dgfem = [*base, 'method.name="ader-dgfem"']
     st = build(load_scene("plate_impact_neohookean_2d", dgfem)).stepper
-    assert (st.picard_max, st.picard_tol) == (4, 1e-12)
+    assert (st.picard_max, st.picard_tol) == (3, 1e-12)
     disc = build(load_scene("plate_impact_neohookean_2d", [*dgfem, "method.picard_max=2", "method.picard_tol=0"]))
     st, state = disc.stepper, disc.initial
     assert (st.picard_max, st.picard_tol) == (2, 0.0)
