@@ -151,11 +151,6 @@ class Material(ABC):
         from .points import tangent_block          # points imports every law, hence here
         return tangent_block(self, F, d)
 
-    @property
-    def point_law(self):
-        """(law id, parameters) of the compiled point functions in `materials.points`."""
-        return self.law_id, np.array(self.law_parameters, dtype=float)
-
     # -- internal variables (none for a hyperelastic law: zero width, no cost) ----------------
     history_names = ()
     """Names of the internal variables, one column each of a point's history array; a law with

@@ -2,17 +2,19 @@
 
 Kernels that loop over points or faces themselves (the DGMPM face and particle passes, the health
 check) evaluate the law inside their loop through `tangent_point` (1D: `tangent_call`); a set of materials is handed
-to them as a table (`law_table`): one row of (law id, parameters) per material.
+to them as a table (`law_table`): one row of (law id, parameters) per material, and each such
+kernel is made for the law its materials share, where they share one (`only_law`): only that
+law's code is left in its loop.
 
-Every law inlined here is compiled into every fused pass that evaluates a law (the face passes,
-the health check), twice per pass where it has a literal-d branch: compile time grows with each
-law's code. The four laws of the benchmarks are inlined (their speed matters in those passes);
-a law added since is called as a compiled function of its own (`inline` left at "never"), cheap
-to compile once, a little slower per call. A law whose Riemann tangent is another law's shares
-that law's branch (a second inlined copy of the same code would only cost compile time).
+A kernel made for one law types and compiles that law's code alone; one made for several
+(`ANY_LAW`) compiles every law inlined here, twice per pass where it has a literal-d branch. The
+four laws of the benchmarks are inlined (their speed matters in those passes); a law added since
+is called as a compiled function of its own (`inline` left at "never"), cheap to compile once, a
+little slower per call. A law whose Riemann tangent is another law's shares that law's branch.
 """
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.extending import overload
 
 from skdgmpm import parallel
 from skdgmpm.kernel_cache import kernel_factory, scratch
@@ -31,10 +33,42 @@ HENCKY_J2 = hencky_j2.HenckyJ2.law_id
 KNOWN = (NEO_HOOKEAN, LINEAR_ELASTIC, SAINT_VENANT_KIRCHHOFF, GAVRILYUK, MOONEY_RIVLIN, J2_PLASTICITY, HENCKY_J2)
 
 
+ANY_LAW = -1
+
+
+def only_law(laws):
+    """The law id every material of a law table shares, or ANY_LAW. Kernels are made for it (a
+    literal ``only`` handed to the dispatch below): a kernel of one law is typed and compiled with
+    that law's code alone. The other laws' branches in the loop cost a fifth of the DGMPM law
+    pass even where never taken (the loop's values no longer stay in registers)."""
+    return int(laws[0]) if len(laws) and bool(np.all(laws == laws[0])) else ANY_LAW
+
+
+def _typed_for(only):
+    """The law a dispatch is typed for: the literal ``only`` of a kernel made for one law, else
+    ANY_LAW (the chain on each point's law id)."""
+    return only.literal_value if isinstance(only, types.IntegerLiteral) else ANY_LAW
+
+
 @njit(cache=True, inline="always")
-def tangent_point(law, prm, F, C, d):
-    """d-block C (d, d, d, d) of the tangent of law ``law`` with parameters ``prm`` at one
-    embedded F (3, 3)."""
+def _parameters(params, m):
+    """Material m's parameters copied into stack scratch: the row view params[m] handed to an
+    inlined law would be reference counted at every point."""
+    prm = scratch((N_PARAMETERS,))              # a literal width: the copy stays in registers
+    for j in range(N_PARAMETERS):
+        prm[j] = params[m, j]
+    return prm
+
+
+def tangent_point(laws, params, m, only, F, C, d):
+    """d-block C (d, d, d, d) of the tangent of material m of the law table (laws, params) at one
+    embedded F (3, 3); ``only``: the law of every material, or ANY_LAW (`only_law`). Compiled
+    code only (the overload below)."""
+    raise TypeError("tangent_point is compiled code's")
+
+
+@njit(cache=True, inline="always")
+def _tangent(law, prm, F, C, d):
     if law == NEO_HOOKEAN or law == HENCKY_J2:         # hencky_j2's Riemann tangent is the neo-Hookean one
         neo_hookean.tangent_point(F, prm, C, d)
     elif law == LINEAR_ELASTIC or law == J2_PLASTICITY:  # j2_plasticity's: the linear elastic one
@@ -47,20 +81,81 @@ def tangent_point(law, prm, F, C, d):
         gavrilyuk.tangent_point(F, prm, C, d)
 
 
+# The overloads are typed for the literal ``only`` of the kernel that inlines them (prefer_literal).
+# Their arguments end in _ (names no kernel uses), and a face's two sides go through one overload
+# (`tangent_points`, `stress_points`): an overload inlined twice in one block, or with the caller's
+# names, makes numba's SSA check warn (NumbaIRAssumptionWarning; numba issues 7623, 9489).
+@overload(tangent_point, inline="always", prefer_literal=True)
+def _tangent_point(laws_, params_, m_, only_, F_, C_, d_):
+    law = _typed_for(only_)
+    if law == ANY_LAW:
+        def impl(laws_, params_, m_, only_, F_, C_, d_):
+            _tangent(laws_[m_], _parameters(params_, m_), F_, C_, d_)
+        return impl
+    tangent = _TANGENTS[law]
+
+    def impl(laws_, params_, m_, only_, F_, C_, d_):
+        tangent(F_, _parameters(params_, m_), C_, d_)
+    return impl
+
+
+def tangent_points(laws, params, m_L, m_R, only, F_L, F_R, C_L, C_R, d):
+    """`tangent_point` of both sides of a face, materials m_L and m_R. Compiled code only."""
+    raise TypeError("tangent_points is compiled code's")
+
+
+@overload(tangent_points, inline="always", prefer_literal=True)
+def _tangent_points(laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, C_L_, C_R_, d_):
+    law = _typed_for(only_)
+    if law == ANY_LAW:
+        def impl(laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, C_L_, C_R_, d_):
+            _tangent(laws_[m_L_], _parameters(params_, m_L_), F_L_, C_L_, d_)
+            _tangent(laws_[m_R_], _parameters(params_, m_R_), F_R_, C_R_, d_)
+        return impl
+    tangent = _TANGENTS[law]
+
+    def impl(laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, C_L_, C_R_, d_):
+        tangent(F_L_, _parameters(params_, m_L_), C_L_, d_)
+        tangent(F_R_, _parameters(params_, m_R_), C_R_, d_)
+    return impl
+
+
 @njit(cache=True)
-def tangent_call(law, prm, F, C, d):
-    """`tangent_point` as a function of its own, compiled once and called: the 1D loops call it
-    (every law compiled once, not inlined at each call site: their compile time halves), the 2D
-    ones inline `tangent_point` (the tangent stays in registers: the hot loops). The choice is made
-    at the top of each kernel (``if d == 1:``), where numba prunes the other branch before typing;
-    inside an inlined helper both branches would be compiled."""
-    tangent_point(law, prm, F, C, d)
+def _tangent_called(laws, params, m, F, C, d):
+    """`tangent_point` for any law as a function of its own, compiled once and called."""
+    tangent_point(laws, params, m, ANY_LAW, F, C, d)
 
 
 @njit(cache=True, inline="always")
-def stress_point(law, prm, F, P, d):
-    """d-block P (d, d) of the first Piola stress of hyperelastic law ``law`` with parameters
-    ``prm`` at one embedded F (3, 3) (laws with history: `stress_update_point`)."""
+def tangent_call(laws, params, m, only, F, C, d):
+    """`tangent_point` called, not inlined: the 1D loops call it (every law compiled once, not
+    inlined at each call site: their compile time halves), the 2D ones inline `tangent_point`
+    (the tangent stays in registers: the hot loops) and call it on a rare path. The choice is
+    made at the top of each kernel (``if d == 1:``), where numba prunes the other branch before
+    typing; inside an inlined helper both branches would be compiled. F and C go through stack
+    copies: an array handed to a call escapes, and the caller's would then stay in memory
+    through its whole loop (a tenth of the DGMPM law pass)."""
+    F_c, C_c = scratch((3, 3)), scratch((d, d, d, d))
+    for i in range(3):
+        for a in range(3):
+            F_c[i, a] = F[i, a]
+    _tangent_called(laws, params, m, F_c, C_c, d)
+    for i in range(d):
+        for a in range(d):
+            for j in range(d):
+                for b in range(d):
+                    C[i, a, j, b] = C_c[i, a, j, b]
+
+
+def stress_point(laws, params, m, only, F, P, d):
+    """d-block P (d, d) of the first Piola stress of material m of the law table (laws, params),
+    a hyperelastic law, at one embedded F (3, 3) (laws with history: `stress_update_point`).
+    Compiled code only."""
+    raise TypeError("stress_point is compiled code's")
+
+
+@njit(cache=True, inline="always")
+def _stress(law, prm, F, P, d):
     if law == NEO_HOOKEAN:
         neo_hookean.stress_point(F, prm, P, d)
     elif law == LINEAR_ELASTIC:
@@ -74,28 +169,120 @@ def stress_point(law, prm, F, P, d):
 
 
 @njit(cache=True, inline="always")
-def stress_update_point(law, prm, F, h_n, h, P, d):
-    """d-block P (d, d) of the first Piola stress at one embedded F (3, 3) at t_{n+1} from the
-    internal variables h_n (n_history,) of t_n, and their update h: the return mapping of a law
-    with history; a hyperelastic law ignores h_n and h (zero width)."""
+def _stress_update(law, prm, F, h_n, h, P, d):
     if law == J2_PLASTICITY:
         j2_plasticity.stress_update_point(F, prm, h_n, h, P, d)
     elif law == HENCKY_J2:
         hencky_j2.stress_update_point(F, prm, h_n, h, P, d)
     else:
-        stress_point(law, prm, F, P, d)
+        _stress(law, prm, F, P, d)
 
 
 @njit(cache=True, inline="always")
-def stress_tangent_point(law, prm, F, h_n, h, P, C, d):
-    """`stress_update_point` and `tangent_point` at one point (a pass that needs both, the law's
-    with the health check): a law whose stress and tangent share their kinematics computes them
-    once (neo-Hookean: F^-T and ln J)."""
+def _stress_tangent(law, prm, F, h_n, h, P, C, d):
     if law == NEO_HOOKEAN:
         neo_hookean.stress_tangent_point(F, prm, P, C, d)
     else:
-        stress_update_point(law, prm, F, h_n, h, P, d)
-        tangent_point(law, prm, F, C, d)
+        _stress_update(law, prm, F, h_n, h, P, d)
+        _tangent(law, prm, F, C, d)
+
+
+@overload(stress_point, inline="always", prefer_literal=True)
+def _stress_point(laws_, params_, m_, only_, F_, P_, d_):
+    law = _typed_for(only_)
+    if law == ANY_LAW:
+        def impl(laws_, params_, m_, only_, F_, P_, d_):
+            _stress(laws_[m_], _parameters(params_, m_), F_, P_, d_)
+        return impl
+    stress = _STRESSES[law]
+
+    def impl(laws_, params_, m_, only_, F_, P_, d_):
+        stress(F_, _parameters(params_, m_), P_, d_)
+    return impl
+
+
+def stress_points(laws, params, m_L, m_R, only, F_L, F_R, P_L, P_R, d):
+    """`stress_point` of both sides of a face (see `tangent_points`). Compiled code only."""
+    raise TypeError("stress_points is compiled code's")
+
+
+@overload(stress_points, inline="always", prefer_literal=True)
+def _stress_points(laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, P_L_, P_R_, d_):
+    law = _typed_for(only_)
+    if law == ANY_LAW:
+        def impl(laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, P_L_, P_R_, d_):
+            _stress(laws_[m_L_], _parameters(params_, m_L_), F_L_, P_L_, d_)
+            _stress(laws_[m_R_], _parameters(params_, m_R_), F_R_, P_R_, d_)
+        return impl
+    stress = _STRESSES[law]
+
+    def impl(laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, P_L_, P_R_, d_):
+        stress(F_L_, _parameters(params_, m_L_), P_L_, d_)
+        stress(F_R_, _parameters(params_, m_R_), P_R_, d_)
+    return impl
+
+
+def stress_update_point(laws, params, m, only, F, h_n, h, P, d):
+    """d-block P (d, d) of the first Piola stress at one embedded F (3, 3) at t_{n+1} from the
+    internal variables h_n (n_history,) of t_n, and their update h: the return mapping of a law
+    with history; a hyperelastic law ignores h_n and h (zero width). Compiled code only."""
+    raise TypeError("stress_update_point is compiled code's")
+
+
+@overload(stress_update_point, inline="always", prefer_literal=True)
+def _stress_update_point(laws_, params_, m_, only_, F_, h_n_, h_, P_, d_):
+    law = _typed_for(only_)
+    if law == ANY_LAW:
+        def impl(laws_, params_, m_, only_, F_, h_n_, h_, P_, d_):
+            _stress_update(laws_[m_], _parameters(params_, m_), F_, h_n_, h_, P_, d_)
+        return impl
+    if law in _UPDATES:
+        update = _UPDATES[law]
+
+        def impl(laws_, params_, m_, only_, F_, h_n_, h_, P_, d_):
+            update(F_, _parameters(params_, m_), h_n_, h_, P_, d_)
+        return impl
+    stress = _STRESSES[law]
+
+    def impl(laws_, params_, m_, only_, F_, h_n_, h_, P_, d_):
+        stress(F_, _parameters(params_, m_), P_, d_)
+    return impl
+
+
+def stress_tangent_point(laws, params, m, only, F, h_n, h, P, C, d):
+    """`stress_update_point` and `tangent_point` at one point (a pass that needs both, the law's
+    with the health check): a law whose stress and tangent share their kinematics computes them
+    once (neo-Hookean: F^-T and ln J). Compiled code only."""
+    raise TypeError("stress_tangent_point is compiled code's")
+
+
+@overload(stress_tangent_point, inline="always", prefer_literal=True)
+def _stress_tangent_point(laws_, params_, m_, only_, F_, h_n_, h_, P_, C_, d_):
+    law = _typed_for(only_)
+    if law == ANY_LAW:
+        def impl(laws_, params_, m_, only_, F_, h_n_, h_, P_, C_, d_):
+            _stress_tangent(laws_[m_], _parameters(params_, m_), F_, h_n_, h_, P_, C_, d_)
+        return impl
+    if law == NEO_HOOKEAN:
+        def impl(laws_, params_, m_, only_, F_, h_n_, h_, P_, C_, d_):
+            neo_hookean.stress_tangent_point(F_, _parameters(params_, m_), P_, C_, d_)
+        return impl
+
+    def impl(laws_, params_, m_, only_, F_, h_n_, h_, P_, C_, d_):
+        stress_update_point(laws_, params_, m_, only_, F_, h_n_, h_, P_, d_)
+        tangent_point(laws_, params_, m_, only_, F_, C_, d_)
+    return impl
+
+
+# each law's point functions, for a kernel made for one law (the chains above for several)
+_TANGENTS = {NEO_HOOKEAN: neo_hookean.tangent_point, HENCKY_J2: neo_hookean.tangent_point,
+             LINEAR_ELASTIC: linear_elastic.tangent_point, J2_PLASTICITY: linear_elastic.tangent_point,
+             SAINT_VENANT_KIRCHHOFF: saint_venant_kirchhoff.tangent_point, MOONEY_RIVLIN: mooney_rivlin.tangent_point,
+             GAVRILYUK: gavrilyuk.tangent_point}
+_STRESSES = {NEO_HOOKEAN: neo_hookean.stress_point, LINEAR_ELASTIC: linear_elastic.stress_point,
+             SAINT_VENANT_KIRCHHOFF: saint_venant_kirchhoff.stress_point, MOONEY_RIVLIN: mooney_rivlin.stress_point,
+             GAVRILYUK: gavrilyuk.stress_point}
+_UPDATES = {J2_PLASTICITY: j2_plasticity.stress_update_point, HENCKY_J2: hencky_j2.stress_update_point}
 
 
 def law_table(materials):
@@ -104,22 +291,25 @@ def law_table(materials):
         if getattr(m, "law_id", None) not in KNOWN:
             raise TypeError(f"{type(m).__name__}: no compiled point law (law_id {getattr(m, 'law_id', None)!r} "
                             f"is not one of {KNOWN}; add it to materials/points.py)")
+        if len(m.law_parameters) > N_PARAMETERS:
+            raise TypeError(f"{type(m).__name__}: {len(m.law_parameters)} law_parameters, the compiled point laws "
+                            f"take at most N_PARAMETERS = {N_PARAMETERS} (raise it in materials/points.py)")
     laws = np.array([m.law_id for m in materials], dtype=np.int64)
-    params = np.zeros((len(materials), max([N_PARAMETERS] + [len(m.law_parameters) for m in materials])))
+    params = np.zeros((len(materials), N_PARAMETERS))
     for k, m in enumerate(materials):
         params[k, : len(m.law_parameters)] = m.law_parameters
     return laws, params
 
 
 @kernel_factory
-def _tangents(d):                       # a literal d: the loops unrolled
-    def tangents(law, prm, F, C):
+def _tangents(d, only):                 # literals: the loops unrolled, one law's code
+    def tangents(laws, params, F, C):
         F_p, C_p = scratch((3, 3)), scratch((d, d, d, d))     # copies, not row views (reference counted)
         for p in range(len(F)):
             for i in range(3):
                 for a in range(3):
                     F_p[i, a] = F[p, i, a]
-            tangent_point(law, prm, F_p, C_p, d)
+            tangent_point(laws, params, 0, only, F_p, C_p, d)
             for i in range(d):
                 for a in range(d):
                     for j in range(d):
@@ -133,8 +323,8 @@ def tangent_block(material, F, d):
     F = np.asarray(F, dtype=float)
     shape = F.shape[:-2]
     flat = np.ascontiguousarray(F.reshape(-1, 3, 3))
-    law, prm = material.point_law
+    laws, params = law_table([material])
     C = np.empty((len(flat), d, d, d, d))
-    kernel = _tangents(d)
-    parallel.rows(len(flat), lambda lo, hi: kernel(law, prm, flat[lo:hi], C[lo:hi]))
+    kernel = _tangents(d, only_law(laws))
+    parallel.rows(len(flat), lambda lo, hi: kernel(laws, params, flat[lo:hi], C[lo:hi]))
     return C.reshape(shape + (d, d, d, d))

@@ -10,7 +10,7 @@ fluxes (nf, nc) are stored: the surface integral is linear in F_N*, so it is tak
 A trace is the triple (indptr, indices, data) of its CSR matrix (n_rows, n_points); the predictor
 u_hat, q_hat is (S, n_points, nc) at S time nodes.
 """
-from skdgmpm.materials.points import tangent_call, tangent_point
+from skdgmpm.materials.points import only_law, tangent_call, tangent_points
 
 from . import parallel
 from .equations import add_normal_flux, riemann
@@ -23,14 +23,14 @@ def interior_flux_sum(T_L, T_R, u_hat, q_hat, rho_L, rho_R, N, mat_L, mat_R, law
     """flux[f] = sum_s weights[s] F_N(Q*[s, f]) for every interior row f (flux (nf, nc)), both
     sides traced from the predictor (u_hat, q_hat) at each node; mat_L, mat_R (nf,) material of
     each side, (laws, params) the law table. Returns the first row that is not hyperbolic, or -1."""
-    kernel, csr = _interior_flux_sum(N.shape[1]), parallel.csr_rows
+    kernel, csr = _interior_flux_sum(N.shape[1], only_law(laws)), parallel.csr_rows
     return parallel.first_bad(len(N), lambda lo, hi: kernel(
         csr(T_L, lo, hi), csr(T_R, lo, hi), u_hat, q_hat, rho_L[lo:hi], rho_R[lo:hi], N[lo:hi], mat_L[lo:hi],
         mat_R[lo:hi], laws, params, weights, flux[lo:hi]))
 
 
 @kernel_factory
-def _interior_flux_sum(d):              # a literal d: the (d, d) loops unrolled
+def _interior_flux_sum(d, only):        # literals: the (d, d) loops unrolled, one law's code
     def interior_flux_sum(T_L, T_R, u_hat, q_hat, rho_L, rho_R, N, mat_L, mat_R, laws, params, weights, flux):
         """Rows of the arrays are read into stack scratch, never handed on as views (u_hat[s],
         N[f], flux[f]): a view is reference counted at every face."""
@@ -51,11 +51,10 @@ def _interior_flux_sum(d):              # a literal d: the (d, d) loops unrolled
                 _gather(T_L, f, u_flat, q_flat, q_L, F_L, d, s * n_points)
                 _gather(T_R, f, u_flat, q_flat, q_R, F_R, d, s * n_points)
                 if d == 1:              # the law called, not inlined (`points.tangent_call`)
-                    tangent_call(laws[mat_L[f]], params[mat_L[f]], F_L, C_L, d)
-                    tangent_call(laws[mat_R[f]], params[mat_R[f]], F_R, C_R, d)
+                    tangent_call(laws, params, mat_L[f], only, F_L, C_L, d)
+                    tangent_call(laws, params, mat_R[f], only, F_R, C_R, d)
                 else:
-                    tangent_point(laws[mat_L[f]], params[mat_L[f]], F_L, C_L, d)
-                    tangent_point(laws[mat_R[f]], params[mat_R[f]], F_R, C_R, d)
+                    tangent_points(laws, params, mat_L[f], mat_R[f], only, F_L, F_R, C_L, C_R, d)
                 if not riemann(q_L, C_L, rho_L[f], q_R, C_R, rho_R[f], n, t_L, t_R, t_s, v_s, d):
                     return f
                 add_normal_flux(t_s, v_s, n, weights[s], o, d)

@@ -5,7 +5,7 @@ from functools import cached_property
 import numpy as np
 from numba import njit
 
-from skdgmpm.materials.points import law_table, stress_tangent_point, stress_update_point, tangent_call
+from skdgmpm.materials.points import law_table, only_law, stress_tangent_point, stress_update_point, tangent_call
 
 from .dgmpm_kernels import record_width, write_record
 from .equations import embed as _embed_point
@@ -17,8 +17,8 @@ from .system import DIMENSION, embed
 
 
 @kernel_factory
-def _states(d, assess, gathered, slots, split):     # literals: the loops unrolled, the health computed or not,
-    dd, nc = d * d, d * d + d                       # U read or gathered, the face records (slots > 0) or not
+def _states(d, assess, gathered, slots, split, only):  # literals: the loops unrolled, the health computed or not,
+    dd, nc = d * d, d * d + d                       # U read or gathered, the face records (slots > 0) or not, one law
     width = record_width(d, slots, split) if slots else 1
 
     def states(laws, params, index, U, rho, h_n, h, Q, health, motion, gather, records):
@@ -53,9 +53,9 @@ def _states(d, assess, gathered, slots, split):     # literals: the loops unroll
             _embed_point(u, F, d)
             m = index[k]
             if assess and d > 1:            # the tangent beside the stress (1D: called apart, below)
-                stress_tangent_point(laws[m], params[m], F, h_k_n, h_k, P, C, d)
+                stress_tangent_point(laws, params, m, only, F, h_k_n, h_k, P, C, d)
             else:
-                stress_update_point(laws[m], params[m], F, h_k_n, h_k, P, d)
+                stress_update_point(laws, params, m, only, F, h_k_n, h_k, P, d)
             for c in range(n_h):
                 h[k, c] = h_k[c]
             ok = True
@@ -71,7 +71,7 @@ def _states(d, assess, gathered, slots, split):     # literals: the loops unroll
                 finite[k] = ok
                 if not ok or d == 1:        # not finite: the health of F = I; 1D: the tangent called apart
                     identity_if_not(ok, F)
-                    tangent_call(laws[m], params[m], F, C, d)
+                    tangent_call(laws, params, m, only, F, C, d)
                 J[k], lo, speed[k] = health_point(F, C, rho_m[m], d)
                 lowest[k] = lo if ok else np.nan
                 first, J_min, omega_min = tally(k, ok, J[k], lowest[k], first, J_min, omega_min)
@@ -88,7 +88,7 @@ def _states(d, assess, gathered, slots, split):     # literals: the loops unroll
 
 
 @kernel_factory
-def _stresses(d, assess):               # literals: the loops unrolled, the health computed or not
+def _stresses(d, assess, only):         # literals: the loops unrolled, the health computed or not, one law
     def stresses(laws, params, index, F_n, h_n, h, P_n, health):
         """P (n, d, d) at F (n, d, d) with the history of t_n and its update: each point copied
         into stack scratch, embedded, and its law's `stress_update_point`. With ``assess``, also
@@ -109,9 +109,9 @@ def _stresses(d, assess):               # literals: the loops unrolled, the heal
             _embed_point(u, F, d)
             m = index[k]
             if assess and d > 1:            # the tangent beside the stress (1D: called apart, below)
-                stress_tangent_point(laws[m], params[m], F, h_k_n, h_k, P, C, d)
+                stress_tangent_point(laws, params, m, only, F, h_k_n, h_k, P, C, d)
             else:
-                stress_update_point(laws[m], params[m], F, h_k_n, h_k, P, d)
+                stress_update_point(laws, params, m, only, F, h_k_n, h_k, P, d)
             for c in range(n_h):
                 h[k, c] = h_k[c]
             ok = True
@@ -123,7 +123,7 @@ def _stresses(d, assess):               # literals: the loops unrolled, the heal
                 finite[k] = ok
                 if not ok or d == 1:        # not finite: the health of F = I; 1D: the tangent called apart
                     identity_if_not(ok, F)
-                    tangent_call(laws[m], params[m], F, C, d)
+                    tangent_call(laws, params, m, only, F, C, d)
                 J[k], lo, speed[k] = health_point(F, C, rho_m[m], d)
                 lowest[k] = lo if ok else np.nan
                 first, J_min, omega_min = tally(k, ok, J[k], lowest[k], first, J_min, omega_min)
@@ -219,7 +219,7 @@ class MaterialSet:
         else:
             slots = records[2].shape[1]
             split = records[0].shape[1] == record_width(d, slots, True)
-        (laws, params), kernel = self.laws, _states(d, assess, gather is not None, slots, split)
+        (laws, params), kernel = self.laws, _states(d, assess, gather is not None, slots, split, only_law(self.laws[0]))
         if gather is None:
             A, nodal = (np.zeros(n + 1, np.int32), np.zeros(0, np.int32), np.zeros(0)), np.zeros((0, U.shape[1]))
         else:
@@ -267,7 +267,7 @@ class MaterialSet:
         m = n if assess else 0
         health = (np.empty(m, dtype=np.bool_), np.empty(m), np.empty(m), np.empty(m), self.densities)
         F = np.ascontiguousarray(F, dtype=float)
-        (laws, params), kernel = self.laws, _stresses(d, assess)
+        (laws, params), kernel = self.laws, _stresses(d, assess, only_law(self.laws[0]))
         index = np.asarray(index, dtype=np.int64)
 
         def rows(lo, hi):

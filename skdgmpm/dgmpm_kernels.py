@@ -32,10 +32,12 @@ of each side, face-major so that a chunk of faces is a contiguous slice.
 import numpy as np
 from numba import njit
 
-from skdgmpm.materials.points import tangent_call, tangent_point
+from skdgmpm.materials.points import only_law, tangent_call, tangent_point, tangent_points
 
-from .equations import add_normal_flux, ctu_parts, ctu_parts_opposite, ctu_split, embed, fluctuations, godunov, impedance, traction
+from .equations import (add_normal_flux, ctu_parts, ctu_parts_opposite, ctu_split, embed, fluctuations, godunov,
+                        impedance, traction)
 from .faces import gather_row
+from .health import identity_if_not
 from .kernel_cache import kernel_factory, scratch
 from .system import DIMENSION, volume_row
 
@@ -229,11 +231,12 @@ def cell_records(dofs, U, Q, rho, cell_material, laws, params, normals, rec, sta
     they hold the split part (`record_width`)."""
     d, slots = normals.shape[2], normals.shape[1]
     split = rec.shape[1] == record_width(d, slots, True)
-    _cell_records(d, slots, dofs.shape[1], split)(dofs, U, Q, rho, cell_material, laws, params, normals, rec, state)
+    kernel = _cell_records(d, slots, dofs.shape[1], split, only_law(laws))
+    kernel(dofs, U, Q, rho, cell_material, laws, params, normals, rec, state)
 
 
 @kernel_factory
-def _cell_records(d, slots, nodes, split):
+def _cell_records(d, slots, nodes, split, only):
     nc, width = d * d + d, record_width(d, slots, split)
 
     def cell_records(dofs, U, Q, rho, cell_material, laws, params, normals, rec, state):
@@ -255,9 +258,9 @@ def _cell_records(d, slots, nodes, split):
             embed(u, F, d)
             m = cell_material[c]
             if d == 1:
-                tangent_call(laws[m], params[m], F, C, d)
+                tangent_call(laws, params, m, only, F, C, d)
             else:
-                tangent_point(laws[m], params[m], F, C, d)
+                tangent_point(laws, params, m, only, F, C, d)
             write_record(q, rho[n0], C, normals, c, rec, state, n_c, r, d, slots, split)
     return cell_records
 
@@ -275,21 +278,21 @@ def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, p
     fluctuations into G (nf, 2, nc) instead, for `cell_corrections`. Returns the first face whose
     acoustic tensor is not positive definite, or -1."""
     rec, state, normals, k_L, k_R, recorded = records
-    kernel = _interior_pass(N.shape[1], normals.shape[1], bool(recorded))
+    kernel = _interior_pass(N.shape[1], normals.shape[1], bool(recorded), only_law(laws))
     return kernel(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params, rec, state, normals, k_L, k_R,
                   ctu, topo_L, topo_R, flux, G)
 
 
 @kernel_factory
-def _interior_pass(d, slots, recorded):     # literals: the loops unrolled, the trace path compiled only if needed
+def _interior_pass(d, slots, recorded, only):  # literals: the loops unrolled, the trace path compiled only if needed
     nc, dd = d * d + d, d * d
     width = record_width(d, slots)
 
     def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params, rec, state, normals,
                       k_L, k_R, ctu, topo_L, topo_R, flux, G):
-        s_L, s_R, q, w_L, w_R = scratch((width,)), scratch((width,)), scratch((nc,)), scratch((nc,)), scratch((nc,))
-        F, C_L, C_R = scratch((3, 3)), scratch((d, d, d, d)), scratch((d, d, d, d))
-        Z_L, Z_R = scratch((d, d)), scratch((d, d))
+        s_L, s_R, w_L, w_R = scratch((width,)), scratch((width,)), scratch((nc,)), scratch((nc,))
+        q_L, q_R, F_L, F_R = scratch((nc,)), scratch((nc,)), scratch((3, 3)), scratch((3, 3))
+        C_L, C_R, Z_L, Z_R = scratch((d, d, d, d)), scratch((d, d, d, d)), scratch((d, d)), scratch((d, d))
         t_L, t_R, t_s, v_s = scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,))
         n, v_L, v_R, o = scratch((d,)), scratch((d,)), scratch((d,)), scratch((nc,))
         for f in range(len(N)):
@@ -298,24 +301,25 @@ def _interior_pass(d, slots, recorded):     # literals: the loops unrolled, the 
                 ok_L = _copy_side(rec, state, c_L, k_L[f] % slots, s_L, Z_L, d)
                 ok_R = _copy_side(rec, state, c_R, k_R[f] % slots, s_R, Z_R, d)
             else:
-                if state[c_L] == 0:                 # the nodes differ: the trace's record
-                    rho_f = _gather(T_L, f, U, Q, rho, q, F, d)
-                    m = cell_material[c_L]
-                    if d == 1:                      # the law called, not inlined (`points.tangent_call`)
-                        tangent_call(laws[m], params[m], F, C_L, d)
-                    else:
-                        tangent_point(laws[m], params[m], F, C_L, d)
-                    ok_L = fill_record(q, rho_f, C_L, normals[c_L], s_L, d, slots, ctu)     # a view: rare path
+                trace_L, trace_R = state[c_L] == 0, state[c_R] == 0     # the nodes differ: the trace's record
+                rho_L = _gather(T_L, f, U, Q, rho, q_L, F_L, d) if trace_L else 1.0
+                rho_R = _gather(T_R, f, U, Q, rho, q_R, F_R, d) if trace_R else 1.0
+                m_L, m_R = cell_material[c_L], cell_material[c_R]
+                if d == 1:                          # the law called, not inlined (`points.tangent_call`)
+                    if trace_L:
+                        tangent_call(laws, params, m_L, only, F_L, C_L, d)
+                    if trace_R:
+                        tangent_call(laws, params, m_R, only, F_R, C_R, d)
+                elif trace_L or trace_R:            # both sides' tangents, one inlined law (a recorded side's unused)
+                    identity_if_not(trace_L, F_L)
+                    identity_if_not(trace_R, F_R)
+                    tangent_points(laws, params, m_L, m_R, only, F_L, F_R, C_L, C_R, d)
+                if trace_L:                         # a view: rare path
+                    ok_L = fill_record(q_L, rho_L, C_L, normals[c_L], s_L, d, slots, ctu)
                 else:
                     ok_L = _copy_record(rec, state, c_L, s_L)
-                if state[c_R] == 0:
-                    rho_f = _gather(T_R, f, U, Q, rho, q, F, d)
-                    m = cell_material[c_R]
-                    if d == 1:
-                        tangent_call(laws[m], params[m], F, C_R, d)
-                    else:
-                        tangent_point(laws[m], params[m], F, C_R, d)
-                    ok_R = fill_record(q, rho_f, C_R, normals[c_R], s_R, d, slots, ctu)
+                if trace_R:
+                    ok_R = fill_record(q_R, rho_R, C_R, normals[c_R], s_R, d, slots, ctu)
                 else:
                     ok_R = _copy_record(rec, state, c_R, s_R)
                 _record_impedance(s_L, k_L[f] % slots, Z_L, d)
@@ -445,11 +449,12 @@ def boundary_sides(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v_L,
     """Interior side of every boundary face: traction t_L, velocity v_L (nf, d), impedance
     Z = sqrt(rho0 A_N) (nf, d, d), tangent C (nf, d, d, d, d) and density rho_f (nf,). Returns the
     first face whose acoustic tensor is not positive definite, or -1."""
-    return _boundary_sides(N.shape[1])(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v_L, Z, C, rho_f)
+    kernel = _boundary_sides(N.shape[1], only_law(laws))
+    return kernel(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v_L, Z, C, rho_f)
 
 
 @kernel_factory
-def _boundary_sides(d):
+def _boundary_sides(d, only):
     def boundary_sides(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v_L, Z, C, rho_f):
         dd, nc = d * d, d * d + d
         q, F, Zi = scratch((nc,)), scratch((3, 3)), scratch((d, d))
@@ -457,9 +462,9 @@ def _boundary_sides(d):
             rho_f[f] = _gather(T, f, U, Q, rho, q, F, d)
             m = cell_material[cell[f]]
             if d == 1:
-                tangent_call(laws[m], params[m], F, C[f], d)
+                tangent_call(laws, params, m, only, F, C[f], d)
             else:
-                tangent_point(laws[m], params[m], F, C[f], d)
+                tangent_point(laws, params, m, only, F, C[f], d)
             traction(q, N[f], t_L[f], d)
             for i in range(d):
                 v_L[f, i] = q[dd + i]

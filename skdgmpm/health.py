@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from skdgmpm.materials.points import tangent_call, tangent_point
+from skdgmpm.materials.points import only_law, tangent_call, tangent_point
 
 from .equations import embed
 from . import parallel
@@ -160,7 +160,7 @@ def identity_if_not(ok, F):
 
 
 @kernel_factory
-def _assess(d):                         # a literal d: the (d, d) loops unrolled
+def _assess(d, only):                   # literals: the (d, d) loops unrolled, one law's code
     def assess(U, Q, material, laws, params, rho, finite, J, lowest, speed):
         """Per point p: finite = all of U and Q finite; J, the smallest acoustic eigenvalue
         (nan where not finite) and the fastest wave along the axes at the law's point tangent
@@ -177,9 +177,9 @@ def _assess(d):                         # a literal d: the (d, d) loops unrolled
             identity_if_not(ok, F)
             m = material[p]
             if d == 1:
-                tangent_call(laws[m], params[m], F, C, d)
+                tangent_call(laws, params, m, only, F, C, d)
             else:
-                tangent_point(laws[m], params[m], F, C, d)
+                tangent_point(laws, params, m, only, F, C, d)
             J[p], lo, speed[p] = health_point(F, C, rho[m], d)
             lowest[p] = lo if ok else np.nan
             first, J_min, omega_min = tally(p, ok, J[p], lowest[p], first, J_min, omega_min)
@@ -194,7 +194,7 @@ def assess(materials, points, U, Q):
     d = DIMENSION[nc]
     laws, params = materials.laws                                        # built once per set
     finite, J, lowest, speed = np.empty(n, dtype=np.bool_), np.empty(n), np.empty(n), np.empty(n)
-    material, kernel, rho = np.asarray(points.material, dtype=np.int64), _assess(d), materials.densities
+    material, kernel, rho = np.asarray(points.material, dtype=np.int64), _assess(d, only_law(laws)), materials.densities
     results = parallel.rows(n, lambda lo, hi: kernel(U[lo:hi], Q[lo:hi], material[lo:hi], laws, params, rho,
                                                      finite[lo:hi], J[lo:hi], lowest[lo:hi], speed[lo:hi]))
     return Health(finite, J, lowest, speed, summarise(parallel.chunks(n), results))

@@ -8,7 +8,7 @@ face passes call the same point functions from the traces, without face arrays.
 import numpy as np
 from numba import njit
 
-from skdgmpm.materials.points import stress_point, tangent_call, tangent_point
+from skdgmpm.materials.points import only_law, stress_points, tangent_call, tangent_points
 
 from . import parallel
 from .equations import add_normal_flux, ctu_split, fluctuations, godunov, impedance as _impedance, riemann
@@ -72,14 +72,14 @@ def _godunov_fluxes(d):
 
 
 @kernel_factory
-def _trace_fluxes(d, traced):          # traced: 1 if Q is traced (a law with history), 0: the law at the trace
+def _trace_fluxes(d, traced, only):    # traced: 1 if Q is traced (a law with history), 0: the law at the trace; one law
     dd, nc = d * d, d * d + d
 
     def trace_fluxes(T_L, T_R, U, Q, rho_L, rho_R, N, mat_L, mat_R, laws, params, flux):
         """Each side's state is formed in stack scratch as the unfused path formed it (the trace
         summed in CSR order, embedded F, P from the law, v = p / rho0), never stored."""
         q_L, q_R, o = scratch((nc,)), scratch((nc,)), scratch((nc,))
-        F_L, F_R, P = scratch((3, 3)), scratch((3, 3)), scratch((d, d))
+        F_L, F_R, P_L, P_R = scratch((3, 3)), scratch((3, 3)), scratch((d, d)), scratch((d, d))
         c_L, c_R = scratch((d, d, d, d)), scratch((d, d, d, d))
         t_L, t_R, t_s, v_s, n = scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,))
         for f in range(len(N)):
@@ -89,22 +89,17 @@ def _trace_fluxes(d, traced):          # traced: 1 if Q is traced (a law with hi
             gather_row(T_R, f, U, Q, q_R, F_R, d)
             m_L, m_R = mat_L[f], mat_R[f]
             if not traced:              # q holds the trace of U: [F, p] -> [P(F), p / rho0]
-                stress_point(laws[m_L], params[m_L], F_L, P, d)
+                stress_points(laws, params, m_L, m_R, only, F_L, F_R, P_L, P_R, d)
                 for i in range(d):
                     for a in range(d):
-                        q_L[i * d + a] = P[i, a]
+                        q_L[i * d + a], q_R[i * d + a] = P_L[i, a], P_R[i, a]
                     q_L[dd + i] = q_L[dd + i] / rho_L[f]
-                stress_point(laws[m_R], params[m_R], F_R, P, d)
-                for i in range(d):
-                    for a in range(d):
-                        q_R[i * d + a] = P[i, a]
                     q_R[dd + i] = q_R[dd + i] / rho_R[f]
             if d == 1:                  # the law called, not inlined (`points.tangent_call`)
-                tangent_call(laws[m_L], params[m_L], F_L, c_L, d)
-                tangent_call(laws[m_R], params[m_R], F_R, c_R, d)
+                tangent_call(laws, params, m_L, only, F_L, c_L, d)
+                tangent_call(laws, params, m_R, only, F_R, c_R, d)
             else:
-                tangent_point(laws[m_L], params[m_L], F_L, c_L, d)
-                tangent_point(laws[m_R], params[m_R], F_R, c_R, d)
+                tangent_points(laws, params, m_L, m_R, only, F_L, F_R, c_L, c_R, d)
             if not riemann(q_L, c_L, rho_L[f], q_R, c_R, rho_R[f], n, t_L, t_R, t_s, v_s, d):
                 return f
             for k in range(nc):
@@ -211,7 +206,7 @@ def trace_fluxes(T_L, T_R, U, Q, rho_L, rho_R, N, mat_L, mat_R, laws, params, fl
     trace of U with densities rho_L, rho_R (nf,), or, if Q (n_dofs, nc) is given, its trace (a
     law with history, which lives at the points only); the tangent at the trace of F. The same
     numbers as `godunov_fluxes` on the traced face states, bit for bit."""
-    kernel, csr = _trace_fluxes(N.shape[1], int(Q is not None)), parallel.csr_rows
+    kernel, csr = _trace_fluxes(N.shape[1], int(Q is not None), only_law(laws)), parallel.csr_rows
     Q = U if Q is None else Q
     bad = parallel.first_bad(len(N), lambda lo, hi: kernel(
         csr(T_L, lo, hi), csr(T_R, lo, hi), U, Q, rho_L[lo:hi], rho_R[lo:hi], N[lo:hi], mat_L[lo:hi], mat_R[lo:hi],

@@ -8,8 +8,8 @@ import pytest
 from skdgmpm.errors import InputError
 import functools
 
-from skdgmpm.materials import (LAWS, Gavrilyuk, LinearElastic, Material, MooneyRivlin, NeoHookean,
-                               SaintVenantKirchhoff, make_material)
+from skdgmpm.materials import (LAWS, Gavrilyuk, HenckyJ2, J2Plasticity, LinearElastic, Material, MooneyRivlin,
+                               NeoHookean, SaintVenantKirchhoff, make_material)
 
 PARAMS = dict(E=2.0, nu=0.3, rho=1.5)
 GAVRILYUK = [functools.partial(Gavrilyuk, a=a) for a in (-1.0, 0.0, 0.5)]   # the whole range of a
@@ -269,3 +269,52 @@ def test_a_law_without_a_compiled_point_law_is_refused():
 
     with pytest.raises(TypeError, match="Unregistered: no compiled point law"):
         law_table([Unregistered(E=1e9, nu=0.3, rho=1000.0)])
+
+
+EVERY_LAW = [LinearElastic, SaintVenantKirchhoff, NeoHookean, GAVRILYUK[2], MOONEY_RIVLIN[1],
+             functools.partial(J2Plasticity, sigma_y=0.01, H=0.1), functools.partial(HenckyJ2, sigma_y=0.01, H=0.1)]
+
+
+@pytest.mark.parametrize("law, d", [(law, 2) for law in EVERY_LAW] + [(NeoHookean, 1)])
+def test_a_kernel_made_for_one_law_gives_the_bits_of_the_kernel_for_several(law, d):
+    # a set whose materials share a law runs kernels typed for that law alone (points.only_law,
+    # its entries in the tables of materials/points.py); the same points through a set that also
+    # holds another law run the kernel of every law (ANY_LAW: the chains of branches). Stresses,
+    # history, the tangent-based health and the batched tangent must agree bit for bit: a law
+    # registered in one dispatch and not the other fails here
+    from skdgmpm.constitutive import MaterialSet
+    from skdgmpm.materials.points import ANY_LAW, _tangents, law_table, only_law
+    from skdgmpm.system import embed
+    mat = law(**PARAMS)
+    other = LinearElastic(**PARAMS) if mat.law_id != LinearElastic.law_id else NeoHookean(**PARAMS)
+    one, mixed = MaterialSet((mat,)), MaterialSet((mat, other))
+    assert only_law(one.laws[0]) == mat.law_id and only_law(mixed.laws[0]) == ANY_LAW
+    F = random_F(0.3, n=40, seed=11)[:, :d, :d].copy()
+    F = F[np.linalg.det(F) > 0.1]
+    U = np.hstack([F.reshape(len(F), -1), np.random.default_rng(4).standard_normal((len(F), d))])
+    index, rho = np.zeros(len(F), np.int64), np.full(len(F), PARAMS["rho"])
+    motion = (np.zeros((len(F), d)), np.zeros((len(F), d)), 1e-6)
+    history = one.initial_history(index)
+    Q1, h1, health1, _ = one.update_and_assess(U.copy(), index, rho, history, motion)
+    Q2, h2, health2, _ = mixed.update_and_assess(U.copy(), index, rho, history, motion)
+    assert np.array_equal(Q1, Q2) and np.array_equal(h1, h2[:, : h1.shape[1]])
+    for a, b in zip((health1.J, health1.omega, health1.speed), (health2.J, health2.omega, health2.speed)):
+        assert np.array_equal(a, b)
+    F3 = np.ascontiguousarray(embed(F))
+    laws, params = law_table([mat])
+    C_any = np.empty((len(F), d, d, d, d))
+    _tangents(d, ANY_LAW)(laws, params, F3, C_any)
+    assert np.array_equal(mat.tangent_block(F3, d), C_any)
+
+
+def test_a_law_with_more_parameters_than_the_table_holds_is_refused():
+    from skdgmpm.materials.points import N_PARAMETERS, law_table
+
+    @dataclasses.dataclass(frozen=True, kw_only=True)
+    class Wide(NeoHookean):
+        @property
+        def law_parameters(self):
+            return (1.0,) * (N_PARAMETERS + 1)
+
+    with pytest.raises(TypeError, match=f"Wide: {N_PARAMETERS + 1} law_parameters"):
+        law_table([Wide(**PARAMS)])
