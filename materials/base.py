@@ -14,6 +14,7 @@ import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from numbers import Real
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -88,6 +89,21 @@ def admissible_inverse(F):
     return F, cof / J[..., None, None], J, ok
 
 
+class PointLaw(NamedTuple):
+    """A law's compiled point functions (njit, for any d; F embedded (3, 3), prm its
+    ``law_parameters``), its class's ``point_law``: ``tangent(F, prm, C, d)``, the d-block of the
+    tangent the Riemann solver and the wave-speed check use (possibly another law's function: the
+    laws then share a branch of the dispatch), and either ``stress(F, prm, P, d)`` (hyperelastic)
+    or ``update(F, prm, h_n, h, P, d)`` (a law with history: its return mapping);
+    ``stress_tangent(F, prm, P, C, d)`` where computing both at once is cheaper than apart.
+    `materials.points` makes every kernel's dispatch from these."""
+
+    tangent: object
+    stress: object = None
+    update: object = None
+    stress_tangent: object = None
+
+
 @dataclass(frozen=True, kw_only=True)
 class Material(ABC):
     """Isotropic elastic material, immutable, with keyword-only parameters.
@@ -101,8 +117,9 @@ class Material(ABC):
     rho : float
         Reference mass density rho0 (kg/m^3), > 0.
 
-    Subclasses implement `first_piola`, `energy` and a compiled point tangent registered in
-    `materials.points` under their ``law_id`` (with ``law_parameters``); the batched tangent,
+    Subclasses implement `first_piola`, `energy` and their compiled point functions, the class
+    attribute ``point_law`` (`PointLaw`), under their ``law_id`` (with ``law_parameters``);
+    the law is registered by its row in `materials.LAWS`. The batched tangent,
     acoustic tensor, wave speeds, hyperbolicity and Cauchy stress follow from them.
     """
 

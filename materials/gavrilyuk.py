@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .base import Material, _check_parameter, _inverse_transpose, admissible_inverse, cofactor
+from .base import Material, PointLaw, _check_parameter, _inverse_transpose, admissible_inverse, cofactor
 
 
 @njit(cache=True, inline="always")
@@ -106,6 +106,7 @@ class Gavrilyuk(Material):
                 + (w1 + 2 * w2 * I1b)[..., None, None] * dI1b)
 
     law_id = 3
+    point_law = PointLaw(tangent_point, stress=stress_point)
 
     @property
     def law_parameters(self):

@@ -9,7 +9,7 @@ from numba import njit
 from skdgmpm.kernel_cache import scratch
 
 from . import neo_hookean
-from .base import _inverse_transpose, admissible_inverse
+from .base import PointLaw, _inverse_transpose, admissible_inverse
 from .j2_plasticity import _SYMMETRIC, J2Material
 from .neo_hookean import NeoHookean
 
@@ -174,6 +174,7 @@ class HenckyJ2(J2Material):
     """
 
     law_id = 5
+    point_law = PointLaw(neo_hookean.tangent_point, update=stress_update_point)
     history_names = ("eqp", "Cpi11", "Cpi22", "Cpi33", "Cpi12", "Cpi13", "Cpi23")
     _stress_updates = _stress_updates
 

@@ -7,7 +7,7 @@ import numpy as np
 from numba import njit
 
 from . import linear_elastic
-from .base import Material, _check_parameter
+from .base import Material, PointLaw, _check_parameter
 from .linear_elastic import LinearElastic
 
 _I = np.eye(3)
@@ -154,6 +154,7 @@ class J2Plasticity(J2Material):
     """
 
     law_id = 4
+    point_law = PointLaw(linear_elastic.tangent_point, update=stress_update_point)
     history_names = ("eqp", "ep11", "ep22", "ep33", "ep12", "ep13", "ep23")
     _stress_updates = _stress_updates
 

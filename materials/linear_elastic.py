@@ -5,7 +5,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .base import Material
+from .base import Material, PointLaw
 
 _I = np.eye(3)
 
@@ -53,6 +53,7 @@ class LinearElastic(Material):
         return self.lam * tr[..., None, None] * _I + 2.0 * self.mu * eps
 
     law_id = 1
+    point_law = PointLaw(tangent_point, stress=stress_point)
 
     @property
     def law_parameters(self):

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .base import Material, _check_parameter, _inverse_transpose, admissible_inverse, cofactor
+from .base import Material, PointLaw, _check_parameter, _inverse_transpose, admissible_inverse, cofactor
 
 
 @njit(cache=True, inline="always")
@@ -93,6 +93,7 @@ class MooneyRivlin(Material):
     beta: float = 0.5
 
     law_id = 6
+    point_law = PointLaw(tangent_point, stress=stress_point)
 
     def __post_init__(self):
         super().__post_init__()

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .base import Material, _inverse_transpose, admissible_inverse, cofactor
+from .base import Material, PointLaw, _inverse_transpose, admissible_inverse, cofactor
 
 
 @njit(cache=True, inline="always")
@@ -84,6 +84,7 @@ class NeoHookean(Material):
     """
 
     law_id = 0
+    point_law = PointLaw(tangent_point, stress=stress_point, stress_tangent=stress_tangent_point)
 
     @property
     def law_parameters(self):

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .base import Material
+from .base import Material, PointLaw
 
 _I = np.eye(3)
 
@@ -81,6 +81,7 @@ class SaintVenantKirchhoff(Material):
         return F @ self._second_piola(F)
 
     law_id = 2
+    point_law = PointLaw(tangent_point, stress=stress_point)
 
     @property
     def law_parameters(self):

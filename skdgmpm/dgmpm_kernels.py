@@ -258,7 +258,7 @@ def _cell_records(d, slots, nodes, split, only):
             embed(u, F, d)
             m = cell_material[c]
             if d == 1:
-                tangent_call(laws, params, m, only, F, C, d)
+                tangent_call(laws, params, m, F, C, d)
             else:
                 tangent_point(laws, params, m, only, F, C, d)
             write_record(q, rho[n0], C, normals, c, rec, state, n_c, r, d, slots, split)
@@ -307,9 +307,9 @@ def _interior_pass(d, slots, recorded, only):  # literals: the loops unrolled, t
                 m_L, m_R = cell_material[c_L], cell_material[c_R]
                 if d == 1:                          # the law called, not inlined (`points.tangent_call`)
                     if trace_L:
-                        tangent_call(laws, params, m_L, only, F_L, C_L, d)
+                        tangent_call(laws, params, m_L, F_L, C_L, d)
                     if trace_R:
-                        tangent_call(laws, params, m_R, only, F_R, C_R, d)
+                        tangent_call(laws, params, m_R, F_R, C_R, d)
                 elif trace_L or trace_R:            # both sides' tangents, one inlined law (a recorded side's unused)
                     identity_if_not(trace_L, F_L)
                     identity_if_not(trace_R, F_R)
@@ -462,7 +462,7 @@ def _boundary_sides(d, only):
             rho_f[f] = _gather(T, f, U, Q, rho, q, F, d)
             m = cell_material[cell[f]]
             if d == 1:
-                tangent_call(laws, params, m, only, F, C[f], d)
+                tangent_call(laws, params, m, F, C[f], d)
             else:
                 tangent_point(laws, params, m, only, F, C[f], d)
             traction(q, N[f], t_L[f], d)

@@ -277,11 +277,11 @@ EVERY_LAW = [LinearElastic, SaintVenantKirchhoff, NeoHookean, GAVRILYUK[2], MOON
 
 @pytest.mark.parametrize("law, d", [(law, 2) for law in EVERY_LAW] + [(NeoHookean, 1)])
 def test_a_kernel_made_for_one_law_gives_the_bits_of_the_kernel_for_several(law, d):
-    # a set whose materials share a law runs kernels typed for that law alone (points.only_law,
-    # its entries in the tables of materials/points.py); the same points through a set that also
-    # holds another law run the kernel of every law (ANY_LAW: the chains of branches). Stresses,
-    # history, the tangent-based health and the batched tangent must agree bit for bit: a law
-    # registered in one dispatch and not the other fails here
+    # a set whose materials share a law runs kernels typed for that law alone (points.only_law:
+    # its point_law's functions called directly); the same points through a set that also holds
+    # another law run the kernel of every law (ANY_LAW: the chain of branches made from
+    # points.LAWS). Stresses, history, the tangent-based health and the batched tangent must agree
+    # bit for bit: a chain that sends a law to another's branch fails here
     from skdgmpm.constitutive import MaterialSet
     from skdgmpm.materials.points import ANY_LAW, _tangents, law_table, only_law
     from skdgmpm.system import embed
@@ -318,3 +318,19 @@ def test_a_law_with_more_parameters_than_the_table_holds_is_refused():
 
     with pytest.raises(TypeError, match=f"Wide: {N_PARAMETERS + 1} law_parameters"):
         law_table([Wide(**PARAMS)])
+
+
+def test_every_registered_law_is_dispatched_and_laws_sharing_a_tangent_share_a_branch():
+    # one registration per law (materials.LAWS); the compiled dispatch is made from it
+    from skdgmpm.materials.base import PointLaw
+    from skdgmpm.materials.points import KNOWN, TANGENT, UPDATE, _branches
+    assert sorted(KNOWN) == sorted(cls.law_id for cls in LAWS.values())
+    for cls in LAWS.values():
+        law = cls.point_law
+        assert isinstance(law, PointLaw) and law.tangent is not None
+        assert (law.stress is None) != (law.update is None), cls.__name__       # hyperelastic, or with history
+    for kind in (TANGENT, UPDATE):
+        ids = [i for branch, _ in _branches(kind) for i in branch]
+        assert sorted(ids) == sorted(KNOWN)                 # every law in exactly one branch
+    shared = {ids for ids, _ in _branches(TANGENT) if len(ids) > 1}
+    assert shared == {(LinearElastic.law_id, J2Plasticity.law_id), (NeoHookean.law_id, HenckyJ2.law_id)}
