@@ -105,17 +105,13 @@ def _function(kind, law):
 _ARGUMENTS = {TANGENT: "x, d", STRESS: "x, d", UPDATE: "h_n, h, P, d", STRESS_TANGENT: "h_n, h, P, C, d"}
 
 
-@functools.cache
-def _dispatch(kind, only):
-    """The point function of ``kind`` for a kernel made for law ``only`` (`_typed_for`), as
-    dispatch(law, F, prm, ...) (the arguments of ``kind``, `_ARGUMENTS`): that law's function
-    (``law`` unread), or for ANY_LAW an if/elif over the branches of ``kind`` (`_branches`), the
-    last taken unasked (`law_table` admits no other id). Its source is written from the table: a
-    recursive overload (typed once per path) took minutes to compile, and a wrapper per branch
-    (for one signature) a third more."""
-    branches, arguments = _branches(kind, KNOWN if only == ANY_LAW else (only,)), _ARGUMENTS[kind]
-    if not branches:                        # a law with history asked for STRESS
-        raise TypeError(f"law {only} has no point function of kind {kind}")
+def _chain(kind):
+    """The dispatch of ``kind`` on a point's law id, for a kernel of several laws (ANY_LAW):
+    chain(law, F, prm, ...) (the arguments of ``kind``, `_ARGUMENTS`), if/elif over the branches
+    of ``kind`` (`_branches`), the last taken unasked (`law_table` admits no other id). Its source
+    is written from the table: a recursive overload (typed once per path) took minutes to
+    compile, and a wrapper per branch (for one signature) a third more."""
+    branches, arguments = _branches(kind), _ARGUMENTS[kind]
     lines = [f"def chain(law, F, prm, {arguments}):"]
     for k, (ids, _) in enumerate(branches):
         if k < len(branches) - 1:
@@ -128,15 +124,18 @@ def _dispatch(kind, only):
     return njit(inline="always")(namespace["chain"])
 
 
-def _branches(kind, laws=KNOWN):
-    """The branches of `_dispatch` for ``kind`` over ``laws``: (law ids, function) in the order of
-    LAWS, the laws that share a function (a Riemann tangent) in one branch."""
+def _branches(kind):
+    """The chain's branches for ``kind``: (law ids, function) in the order of LAWS, the laws that
+    share a function (a Riemann tangent) in one branch."""
     branches = {}
-    for law in laws:
+    for law in LAWS:
         function = _function(kind, law)
         if function is not None:
             branches.setdefault(function, []).append(law)
     return [(tuple(ids), function) for function, ids in branches.items()]
+
+
+_CHAINS = {kind: _chain(kind) for kind in (TANGENT, STRESS, UPDATE, STRESS_TANGENT)}
 
 
 # The overloads are typed for the literals of the kernel that inlines them (prefer_literal). Their
@@ -183,57 +182,110 @@ def stress_tangent_point(laws, params, m, only, F, h_n, h, P, C, d):
 
 @overload(tangent_point, inline="always", prefer_literal=True)
 def _tangent_point(laws_, params_, m_, only_, F_, C_, d_):
-    tangent = _dispatch(TANGENT, _typed_for(only_))
+    law = _typed_for(only_)
+    if law == ANY_LAW:
+        chain = _CHAINS[TANGENT]
+
+        def impl(laws_, params_, m_, only_, F_, C_, d_):
+            chain(laws_[m_], F_, _parameters(params_, m_), C_, d_)
+        return impl
+    tangent = LAWS[law].tangent
 
     def impl(laws_, params_, m_, only_, F_, C_, d_):
-        tangent(laws_[m_], F_, _parameters(params_, m_), C_, d_)
+        tangent(F_, _parameters(params_, m_), C_, d_)
     return impl
 
 
 @overload(tangent_points, inline="always", prefer_literal=True)
 def _tangent_points(laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, C_L_, C_R_, d_):
-    tangent = _dispatch(TANGENT, _typed_for(only_))
+    law = _typed_for(only_)
+    if law == ANY_LAW:
+        chain = _CHAINS[TANGENT]
+
+        def impl(laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, C_L_, C_R_, d_):
+            chain(laws_[m_L_], F_L_, _parameters(params_, m_L_), C_L_, d_)
+            chain(laws_[m_R_], F_R_, _parameters(params_, m_R_), C_R_, d_)
+        return impl
+    tangent = LAWS[law].tangent
 
     def impl(laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, C_L_, C_R_, d_):
-        tangent(laws_[m_L_], F_L_, _parameters(params_, m_L_), C_L_, d_)
-        tangent(laws_[m_R_], F_R_, _parameters(params_, m_R_), C_R_, d_)
+        tangent(F_L_, _parameters(params_, m_L_), C_L_, d_)
+        tangent(F_R_, _parameters(params_, m_R_), C_R_, d_)
     return impl
 
 
 @overload(stress_point, inline="always", prefer_literal=True)
 def _stress_point(laws_, params_, m_, only_, F_, P_, d_):
-    stress = _dispatch(STRESS, _typed_for(only_))
+    law = _typed_for(only_)
+    if law == ANY_LAW:
+        chain = _CHAINS[STRESS]
+
+        def impl(laws_, params_, m_, only_, F_, P_, d_):
+            chain(laws_[m_], F_, _parameters(params_, m_), P_, d_)
+        return impl
+    stress = LAWS[law].stress
 
     def impl(laws_, params_, m_, only_, F_, P_, d_):
-        stress(laws_[m_], F_, _parameters(params_, m_), P_, d_)
+        stress(F_, _parameters(params_, m_), P_, d_)
     return impl
 
 
 @overload(stress_points, inline="always", prefer_literal=True)
 def _stress_points(laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, P_L_, P_R_, d_):
-    stress = _dispatch(STRESS, _typed_for(only_))
+    law = _typed_for(only_)
+    if law == ANY_LAW:
+        chain = _CHAINS[STRESS]
+
+        def impl(laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, P_L_, P_R_, d_):
+            chain(laws_[m_L_], F_L_, _parameters(params_, m_L_), P_L_, d_)
+            chain(laws_[m_R_], F_R_, _parameters(params_, m_R_), P_R_, d_)
+        return impl
+    stress = LAWS[law].stress
 
     def impl(laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, P_L_, P_R_, d_):
-        stress(laws_[m_L_], F_L_, _parameters(params_, m_L_), P_L_, d_)
-        stress(laws_[m_R_], F_R_, _parameters(params_, m_R_), P_R_, d_)
+        stress(F_L_, _parameters(params_, m_L_), P_L_, d_)
+        stress(F_R_, _parameters(params_, m_R_), P_R_, d_)
     return impl
 
 
 @overload(stress_update_point, inline="always", prefer_literal=True)
 def _stress_update_point(laws_, params_, m_, only_, F_, h_n_, h_, P_, d_):
-    update = _dispatch(UPDATE, _typed_for(only_))
+    law = _typed_for(only_)
+    if law == ANY_LAW:
+        chain = _CHAINS[UPDATE]
+
+        def impl(laws_, params_, m_, only_, F_, h_n_, h_, P_, d_):
+            chain(laws_[m_], F_, _parameters(params_, m_), h_n_, h_, P_, d_)
+        return impl
+    update, stress = LAWS[law].update, LAWS[law].stress
+    if update is not None:
+        def impl(laws_, params_, m_, only_, F_, h_n_, h_, P_, d_):
+            update(F_, _parameters(params_, m_), h_n_, h_, P_, d_)
+        return impl
 
     def impl(laws_, params_, m_, only_, F_, h_n_, h_, P_, d_):
-        update(laws_[m_], F_, _parameters(params_, m_), h_n_, h_, P_, d_)
+        stress(F_, _parameters(params_, m_), P_, d_)
     return impl
 
 
 @overload(stress_tangent_point, inline="always", prefer_literal=True)
 def _stress_tangent_point(laws_, params_, m_, only_, F_, h_n_, h_, P_, C_, d_):
-    both = _dispatch(STRESS_TANGENT, _typed_for(only_))
+    law = _typed_for(only_)
+    if law == ANY_LAW:
+        chain = _CHAINS[STRESS_TANGENT]
+
+        def impl(laws_, params_, m_, only_, F_, h_n_, h_, P_, C_, d_):
+            chain(laws_[m_], F_, _parameters(params_, m_), h_n_, h_, P_, C_, d_)
+        return impl
+    both = LAWS[law].stress_tangent
+    if both is not None:
+        def impl(laws_, params_, m_, only_, F_, h_n_, h_, P_, C_, d_):
+            both(F_, _parameters(params_, m_), P_, C_, d_)
+        return impl
 
     def impl(laws_, params_, m_, only_, F_, h_n_, h_, P_, C_, d_):
-        both(laws_[m_], F_, _parameters(params_, m_), h_n_, h_, P_, C_, d_)
+        stress_update_point(laws_, params_, m_, only_, F_, h_n_, h_, P_, d_)
+        tangent_point(laws_, params_, m_, only_, F_, C_, d_)
     return impl
 
 
@@ -269,7 +321,7 @@ def law_table(materials):
     for m in materials:             # a new law must be registered, never fall into another's branch
         if getattr(m, "law_id", None) not in KNOWN:
             raise TypeError(f"{type(m).__name__}: no compiled point law (law_id {getattr(m, 'law_id', None)!r} "
-                            f"is not one of {KNOWN}; give its class a point_law and its row in materials.LAWS)")
+                            f"is not one of {KNOWN}; add its row to LAWS in materials/points.py)")
         if len(m.law_parameters) > N_PARAMETERS:
             raise TypeError(f"{type(m).__name__}: {len(m.law_parameters)} law_parameters, the compiled point laws "
                             f"take at most N_PARAMETERS = {N_PARAMETERS} (raise it in materials/points.py)")
