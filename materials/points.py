@@ -62,80 +62,66 @@ def _parameters(params, m):
 
 
 # ---------------------------------------------------------------- the dispatch, made from LAWS
-# What a point function computes (``kind``) and the arguments after (F, prm) it takes: TANGENT
-# (C, d), STRESS (P, d), UPDATE (h_n, h, P, d), STRESS_TANGENT (h_n, h, P, C, d).
+# What a point function computes (``kind``) and the arguments after (F, prm) it takes.
 TANGENT, STRESS, UPDATE, STRESS_TANGENT = range(4)
+_ARGUMENTS = {TANGENT: ("C", "d"), STRESS: ("P", "d"), UPDATE: ("h_n", "h", "P", "d"),
+              STRESS_TANGENT: ("h_n", "h", "P", "C", "d")}
 
 
-def _without_history(stress):
-    """A hyperelastic law's stress as an update (its history, zero wide, ignored)."""
-    @njit(inline="always")
-    def update(F, prm, h_n, h, P, d):
-        stress(F, prm, P, d)
-    return update
+def _statements(kind, law):
+    """How law ``law`` computes ``kind``: the point functions of its `base.PointLaw` it calls in
+    turn, each with the names of its arguments (None: a law with history has no STRESS). A law
+    without history updates by its stress (its history, zero wide, unread); one without a joint
+    stress and tangent computes them apart."""
+    e = LAWS[law]
+    tangent = ((e.tangent, ("F", "prm", "C", "d")),)
+    stress = None if e.stress is None else ((e.stress, ("F", "prm", "P", "d")),)
+    update = ((e.update, ("F", "prm", "h_n", "h", "P", "d")),) if e.update else stress
+    both = ((e.stress_tangent, ("F", "prm", "P", "C", "d")),) if e.stress_tangent else update + tangent
+    return (tangent, stress, update, both)[kind]
 
 
-def _at_hand(stress_tangent):
-    """A law's joint stress and tangent with the arguments of STRESS_TANGENT (no history)."""
-    @njit(inline="always")
-    def with_history(F, prm, h_n, h, P, C, d):
-        stress_tangent(F, prm, P, C, d)
-    return with_history
-
-
-def _apart(update, tangent):
-    """STRESS_TANGENT of a law without a joint function: its update, then its tangent."""
-    @njit(inline="always")
-    def stress_tangent(F, prm, h_n, h, P, C, d):
-        update(F, prm, h_n, h, P, d)
-        tangent(F, prm, C, d)
-    return stress_tangent
+def _branches(kind, laws=KNOWN):
+    """The branches of ``kind``'s dispatch over ``laws``: (law ids, `_statements`) in the order of
+    LAWS, the laws that compute it alike (e.g. share a Riemann tangent) in one branch."""
+    branches = {}
+    for law in laws:
+        statements = _statements(kind, law)
+        if statements is not None:
+            branches.setdefault(statements, []).append(law)
+    return [(tuple(ids), statements) for statements, ids in branches.items()]
 
 
 @functools.cache
-def _function(kind, law):
-    """Law ``law``'s point function of ``kind`` (None: a law with history has no STRESS)."""
-    e = LAWS[law]
-    update = e.update or _without_history(e.stress)
-    both = _at_hand(e.stress_tangent) if e.stress_tangent else _apart(update, e.tangent)
-    return (e.tangent, e.stress, update, both)[kind]
-
-
-# what follows F and prm in the call of each kind's point functions
-_ARGUMENTS = {TANGENT: "x, d", STRESS: "x, d", UPDATE: "h_n, h, P, d", STRESS_TANGENT: "h_n, h, P, C, d"}
-
-
-def _chain(kind):
-    """The dispatch of ``kind`` on a point's law id, for a kernel of several laws (ANY_LAW):
-    chain(law, F, prm, ...) (the arguments of ``kind``, `_ARGUMENTS`), if/elif over the branches
-    of ``kind`` (`_branches`), the last taken unasked (`law_table` admits no other id). Its source
-    is written from the table: a recursive overload (typed once per path) took minutes to
-    compile, and a wrapper per branch (for one signature) a third more."""
-    branches, arguments = _branches(kind), _ARGUMENTS[kind]
-    lines = [f"def chain(law, F, prm, {arguments}):"]
-    for k, (ids, _) in enumerate(branches):
-        if k < len(branches) - 1:
-            lines.append(f"    {'elif' if k else 'if'} " + " or ".join(f"law == {i}" for i in ids) + ":")
-        elif k:
-            lines.append("    else:")
-        lines.append(f"{'        ' if k or len(branches) > 1 else '    '}law_{k}(F, prm, {arguments})")
-    namespace = {f"law_{k}": function for k, (_, function) in enumerate(branches)}
+def _impl(kind, only, signature, sides):
+    """The body of an overload of ``kind`` whose parameters are ``signature``, for a kernel made
+    for law ``only`` (`_typed_for`): per side (material, F and the kind's arguments
+    (`_ARGUMENTS`), as the signature names them), that law's point functions called, or for
+    ANY_LAW an if/elif on the side's law id over the branches of ``kind`` (`_branches`), the last
+    taken unasked (`law_table` admits no other id). Its source is written from the table, the
+    law's functions called in it directly: every wrapper between a kernel and a law is one more
+    copy of the law's code for numba to inline (a recursive overload, typed once per path, took
+    minutes to compile)."""
+    branches = _branches(kind, KNOWN if only == ANY_LAW else (only,))
+    if not branches:                        # a law with history asked for STRESS
+        raise TypeError(f"law {only} has no point function of kind {kind}")
+    namespace, lines = {"_parameters": _parameters}, [f"def impl({signature}):"]
+    for s, (m, F, arguments) in enumerate(sides):
+        names = dict(zip(_ARGUMENTS[kind], arguments), F=F, prm=f"prm_{s}_")
+        lines.append(f"    prm_{s}_ = _parameters(params_, {m})")
+        if len(branches) > 1:
+            lines.append(f"    law_{s}_ = laws_[{m}]")
+        for k, (ids, statements) in enumerate(branches):
+            indent = "    "
+            if len(branches) > 1:
+                test = " or ".join(f"law_{s}_ == {i}" for i in ids)
+                lines.append(f"    {'elif ' + test if k else 'if ' + test}:" if k < len(branches) - 1 else "    else:")
+                indent = "        "
+            for j, (function, parameters) in enumerate(statements):
+                namespace[f"law_{k}_{j}"] = function
+                lines.append(f"{indent}law_{k}_{j}(" + ", ".join(names[a] for a in parameters) + ")")
     exec("\n".join(lines), namespace)
-    return njit(inline="always")(namespace["chain"])
-
-
-def _branches(kind):
-    """The chain's branches for ``kind``: (law ids, function) in the order of LAWS, the laws that
-    share a function (a Riemann tangent) in one branch."""
-    branches = {}
-    for law in LAWS:
-        function = _function(kind, law)
-        if function is not None:
-            branches.setdefault(function, []).append(law)
-    return [(tuple(ids), function) for function, ids in branches.items()]
-
-
-_CHAINS = {kind: _chain(kind) for kind in (TANGENT, STRESS, UPDATE, STRESS_TANGENT)}
+    return namespace["impl"]
 
 
 # The overloads are typed for the literals of the kernel that inlines them (prefer_literal). Their
@@ -180,113 +166,39 @@ def stress_tangent_point(laws, params, m, only, F, h_n, h, P, C, d):
     raise TypeError("stress_tangent_point is compiled code's")
 
 
+# Each overload: its signature, and per side (material, F, the kind's arguments) as it names them.
 @overload(tangent_point, inline="always", prefer_literal=True)
 def _tangent_point(laws_, params_, m_, only_, F_, C_, d_):
-    law = _typed_for(only_)
-    if law == ANY_LAW:
-        chain = _CHAINS[TANGENT]
-
-        def impl(laws_, params_, m_, only_, F_, C_, d_):
-            chain(laws_[m_], F_, _parameters(params_, m_), C_, d_)
-        return impl
-    tangent = LAWS[law].tangent
-
-    def impl(laws_, params_, m_, only_, F_, C_, d_):
-        tangent(F_, _parameters(params_, m_), C_, d_)
-    return impl
+    return _impl(TANGENT, _typed_for(only_), "laws_, params_, m_, only_, F_, C_, d_", (("m_", "F_", ("C_", "d_")),))
 
 
 @overload(tangent_points, inline="always", prefer_literal=True)
 def _tangent_points(laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, C_L_, C_R_, d_):
-    law = _typed_for(only_)
-    if law == ANY_LAW:
-        chain = _CHAINS[TANGENT]
-
-        def impl(laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, C_L_, C_R_, d_):
-            chain(laws_[m_L_], F_L_, _parameters(params_, m_L_), C_L_, d_)
-            chain(laws_[m_R_], F_R_, _parameters(params_, m_R_), C_R_, d_)
-        return impl
-    tangent = LAWS[law].tangent
-
-    def impl(laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, C_L_, C_R_, d_):
-        tangent(F_L_, _parameters(params_, m_L_), C_L_, d_)
-        tangent(F_R_, _parameters(params_, m_R_), C_R_, d_)
-    return impl
+    return _impl(TANGENT, _typed_for(only_), "laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, C_L_, C_R_, d_",
+                 (("m_L_", "F_L_", ("C_L_", "d_")), ("m_R_", "F_R_", ("C_R_", "d_"))))
 
 
 @overload(stress_point, inline="always", prefer_literal=True)
 def _stress_point(laws_, params_, m_, only_, F_, P_, d_):
-    law = _typed_for(only_)
-    if law == ANY_LAW:
-        chain = _CHAINS[STRESS]
-
-        def impl(laws_, params_, m_, only_, F_, P_, d_):
-            chain(laws_[m_], F_, _parameters(params_, m_), P_, d_)
-        return impl
-    stress = LAWS[law].stress
-
-    def impl(laws_, params_, m_, only_, F_, P_, d_):
-        stress(F_, _parameters(params_, m_), P_, d_)
-    return impl
+    return _impl(STRESS, _typed_for(only_), "laws_, params_, m_, only_, F_, P_, d_", (("m_", "F_", ("P_", "d_")),))
 
 
 @overload(stress_points, inline="always", prefer_literal=True)
 def _stress_points(laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, P_L_, P_R_, d_):
-    law = _typed_for(only_)
-    if law == ANY_LAW:
-        chain = _CHAINS[STRESS]
-
-        def impl(laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, P_L_, P_R_, d_):
-            chain(laws_[m_L_], F_L_, _parameters(params_, m_L_), P_L_, d_)
-            chain(laws_[m_R_], F_R_, _parameters(params_, m_R_), P_R_, d_)
-        return impl
-    stress = LAWS[law].stress
-
-    def impl(laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, P_L_, P_R_, d_):
-        stress(F_L_, _parameters(params_, m_L_), P_L_, d_)
-        stress(F_R_, _parameters(params_, m_R_), P_R_, d_)
-    return impl
+    return _impl(STRESS, _typed_for(only_), "laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, P_L_, P_R_, d_",
+                 (("m_L_", "F_L_", ("P_L_", "d_")), ("m_R_", "F_R_", ("P_R_", "d_"))))
 
 
 @overload(stress_update_point, inline="always", prefer_literal=True)
 def _stress_update_point(laws_, params_, m_, only_, F_, h_n_, h_, P_, d_):
-    law = _typed_for(only_)
-    if law == ANY_LAW:
-        chain = _CHAINS[UPDATE]
-
-        def impl(laws_, params_, m_, only_, F_, h_n_, h_, P_, d_):
-            chain(laws_[m_], F_, _parameters(params_, m_), h_n_, h_, P_, d_)
-        return impl
-    update, stress = LAWS[law].update, LAWS[law].stress
-    if update is not None:
-        def impl(laws_, params_, m_, only_, F_, h_n_, h_, P_, d_):
-            update(F_, _parameters(params_, m_), h_n_, h_, P_, d_)
-        return impl
-
-    def impl(laws_, params_, m_, only_, F_, h_n_, h_, P_, d_):
-        stress(F_, _parameters(params_, m_), P_, d_)
-    return impl
+    return _impl(UPDATE, _typed_for(only_), "laws_, params_, m_, only_, F_, h_n_, h_, P_, d_",
+                 (("m_", "F_", ("h_n_", "h_", "P_", "d_")),))
 
 
 @overload(stress_tangent_point, inline="always", prefer_literal=True)
 def _stress_tangent_point(laws_, params_, m_, only_, F_, h_n_, h_, P_, C_, d_):
-    law = _typed_for(only_)
-    if law == ANY_LAW:
-        chain = _CHAINS[STRESS_TANGENT]
-
-        def impl(laws_, params_, m_, only_, F_, h_n_, h_, P_, C_, d_):
-            chain(laws_[m_], F_, _parameters(params_, m_), h_n_, h_, P_, C_, d_)
-        return impl
-    both = LAWS[law].stress_tangent
-    if both is not None:
-        def impl(laws_, params_, m_, only_, F_, h_n_, h_, P_, C_, d_):
-            both(F_, _parameters(params_, m_), P_, C_, d_)
-        return impl
-
-    def impl(laws_, params_, m_, only_, F_, h_n_, h_, P_, C_, d_):
-        stress_update_point(laws_, params_, m_, only_, F_, h_n_, h_, P_, d_)
-        tangent_point(laws_, params_, m_, only_, F_, C_, d_)
-    return impl
+    return _impl(STRESS_TANGENT, _typed_for(only_), "laws_, params_, m_, only_, F_, h_n_, h_, P_, C_, d_",
+                 (("m_", "F_", ("h_n_", "h_", "P_", "C_", "d_")),))
 
 
 @njit(cache=True)
@@ -321,7 +233,7 @@ def law_table(materials):
     for m in materials:             # a new law must be registered, never fall into another's branch
         if getattr(m, "law_id", None) not in KNOWN:
             raise TypeError(f"{type(m).__name__}: no compiled point law (law_id {getattr(m, 'law_id', None)!r} "
-                            f"is not one of {KNOWN}; add its row to LAWS in materials/points.py)")
+                            f"is not one of {KNOWN}; give its class a point_law and its row in materials.LAWS)")
         if len(m.law_parameters) > N_PARAMETERS:
             raise TypeError(f"{type(m).__name__}: {len(m.law_parameters)} law_parameters, the compiled point laws "
                             f"take at most N_PARAMETERS = {N_PARAMETERS} (raise it in materials/points.py)")
