@@ -195,8 +195,9 @@ class MaterialSet:
         the positions moved by the trapezoidal rule, x + dt (v_old + v) / 2. ``gather`` = (A CSR,
         nodal values): the points' states are A @ nodal, computed row by row in the pass and
         written into U (the same bits as `parallel.matmul`). ``records`` = (rec, row, normals,
-        record states): each point's face record also written, into row row[k] of rec (rows
-        distinct: `_states`; the width of rec says whether it holds the split part)."""
+        record states): each point's face record also written, into row row[k] of rec = (face
+        parts, split parts) (rows distinct: `_states`; the split parts' width says whether the
+        records hold them)."""
         return self._update(U, index, rho, history, motion, gather, records)
 
     def _update(self, U, index, rho, history, motion, gather=None, records=None):
@@ -215,10 +216,11 @@ class MaterialSet:
         d = DIMENSION[U.shape[1]]
         if records is None:
             slots, split = 0, False
-            records = (np.empty((0, 1)), np.zeros(0, np.int32), np.empty((0, 1, d)), np.empty(0, np.int8))
+            records = ((np.empty((0, 1)), np.empty((0, 0))), np.zeros(0, np.int32), np.empty((0, 1, d)),
+                       np.empty(0, np.int8))
         else:
             slots = records[2].shape[1]
-            split = records[0].shape[1] == record_width(d, slots, True)
+            split = records[0][1].shape[1] > 0
         (laws, params), kernel = self.laws, _states(d, assess, gather is not None, slots, split, only_law(self.laws[0]))
         if gather is None:
             A, nodal = (np.zeros(n + 1, np.int32), np.zeros(0, np.int32), np.zeros(0)), np.zeros((0, U.shape[1]))

@@ -41,7 +41,8 @@ from skdgmpm.materials.points import law_table
 
 from . import parallel, system
 from .dgmpm_kernels import (boundary_edge_corrections, boundary_pass, boundary_sides, cell_corrections, cell_records,
-                            cell_update, euler_update, integrate_faces, interior_pass, record_width)
+                            cell_update, euler_update, face_width, integrate_faces, interior_pass,
+                            record_width)
 from .errors import InputError
 from .faces import interior_faces
 from .integrators import INTEGRATORS
@@ -182,8 +183,9 @@ class DGMPM(GodunovScheme):
         tangent at hand, no pass of their own), and ``_records_of`` = (U, Q) of the state they
         describe once the step is accepted; `interface_flux` computes them for any other state."""
         d, slots = self.d, self.cell_normals.shape[1]
-        n_cells = len(self.cell_dofs)
-        return (self._buffer("records", (n_cells, record_width(d, slots, self.ctu is not None))),
+        n_cells, face = len(self.cell_dofs), face_width(d, slots)
+        rest = record_width(d, slots, self.ctu is not None) - face
+        return ((self._buffer("records", (n_cells, face)), self._buffer("records' split parts", (n_cells, rest))),
                 self._buffer("record states", n_cells, np.int8))
 
     # ---------------------------------------------------------------- set-up
@@ -307,7 +309,7 @@ class DGMPM(GodunovScheme):
         if made is None or made[0] is not grid_state.U or made[1] is not grid_state.Q:
             parallel.rows(n_cells, lambda lo, hi: cell_records(
                 dofs[lo:hi], grid_state.U, grid_state.Q, rho, self.cell_material[lo:hi], *laws, normals[lo:hi],
-                rec[lo:hi], state[lo:hi]))
+                (rec[0][lo:hi], rec[1][lo:hi]), state[lo:hi]))
         recorded = bool(np.all(state != 0))         # one particle per cell: the faces read no trace
         # CTU: with every cell recorded, the faces keep their fluctuations (nf, 2, nc) and each cell
         # sends the parts of those entering it (`cell_corrections`), in place; otherwise the faces
@@ -333,7 +335,8 @@ class DGMPM(GodunovScheme):
             sources, scale, signs = self.cell_sources
             W = G.reshape(-1, nc)
             parallel.rows(n_cells, lambda lo, hi: cell_corrections(
-                sources[lo:hi], scale[lo:hi], signs[lo:hi], rec[lo:hi], normals[lo:hi], W, corr_bnd))
+                sources[lo:hi], scale[lo:hi], signs[lo:hi], (rec[0][lo:hi], rec[1][lo:hi]), normals[lo:hi], W,
+                corr_bnd))
             return flux, G, corr_bnd
         if ctu:
             corr = np.empty((len(f), 1, nc))

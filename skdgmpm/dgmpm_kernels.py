@@ -86,7 +86,10 @@ def _add_boundary_edges(edge_bnd, f, G_0, G_1, corr_bnd):
 # The layout of a side record, written once: what a face reads, q (nc) and per face direction of
 # the cell (``slots``) its impedance Z = sqrt(rho A_n) (d * d each); then, for CTU's split only,
 # 1 / rho, the tangent C (d^4) and per face direction Z^-1 (d * d each). DCU's records stop
-# after the face part (14 numbers in 2D, not 39: the bytes a record pass writes).
+# after the face part (14 numbers in 2D, not 39: the bytes a record pass writes). The cell
+# records keep the two parts in two arrays, ``rec`` = (face parts, split parts): the face pass
+# reads 112 bytes of each of its cells' rows, in rows of 112 bytes, not of 312 (the split part
+# between them would be half the lines it pulls from memory).
 @njit(cache=True, inline="always")
 def _impedance_at(d, slot):
     """Where Z along the face direction ``slot`` starts."""
@@ -118,7 +121,12 @@ def _edge_slot(k, e, slots):
 
 def record_width(d, slots, split=True):
     """Entries of one side record: its face part, and with ``split`` (CTU) its split part."""
-    return d * d + d + d * d * slots + ((1 + d ** 4 + d * d * slots) if split else 0)
+    return face_width(d, slots) + ((1 + d ** 4 + d * d * slots) if split else 0)
+
+
+def face_width(d, slots):
+    """Entries of a side record's face part (the first array of the cell records)."""
+    return d * d + d + d * d * slots
 
 
 @njit(cache=True, inline="always")
@@ -157,38 +165,50 @@ def fill_record(q, rho, C, normals, r, d, slots, split):
 @njit(cache=True, inline="always")
 def write_record(q, rho, C, normals, c, rec, state, n_c, r, d, slots, split):
     """The side record of cell c (`fill_record`, the cell's face directions normals[c]) into row c
-    of rec, and its record state: 1, or 2 where an acoustic tensor is not positive definite
-    (`cell_records`, and the law's pass with one particle per cell, `skdgmpm.constitutive`).
-    n_c (slots, d) and r (record width) are stack scratch (rows copied, never viewed)."""
+    of rec = (face parts, split parts), and its record state: 1, or 2 where an acoustic tensor is
+    not positive definite (`cell_records`, and the law's pass with one particle per cell,
+    `skdgmpm.constitutive`). n_c (slots, d) and r (record width) are stack scratch (rows copied,
+    never viewed)."""
     for s in range(slots):
         for i in range(d):
             n_c[s, i] = normals[c, s, i]
     state[c] = 1 if fill_record(q, rho, C, n_c, r, d, slots, split) else 2
-    # the width from the literals (`record_width`), not rec.shape[1]: the copy unrolls
-    width = _inverse_impedance_at(d, slots, slots) if split else _inv_rho_at(d, slots)
-    for k in range(width):
-        rec[c, k] = r[k]
+    # the widths from the literals (`record_width`), not the arrays' shapes: the copies unroll
+    face, rest = rec
+    fw = _inv_rho_at(d, slots)
+    for k in range(fw):
+        face[c, k] = r[k]
+    if split:
+        for k in range(_inverse_impedance_at(d, slots, slots) - fw):
+            rest[c, k] = r[fw + k]
 
 
 @njit(cache=True, inline="always")
 def _copy_record(rec, state, c, r):
-    """Row c of the cell records into the side record r (stack scratch: no array view, whose
-    reference counting would cost more than the copy); whether it is admissible."""
-    for k in range(rec.shape[1]):
-        r[k] = rec[c, k]
+    """Row c of the cell records rec = (face parts, split parts) into the side record r (stack
+    scratch: no array view, whose reference counting would cost more than the copy); whether it
+    is admissible."""
+    face, rest = rec
+    fw = face.shape[1]
+    for k in range(fw):
+        r[k] = face[c, k]
+    for k in range(rest.shape[1]):
+        r[fw + k] = rest[c, k]
     return state[c] == 1
 
 
 @njit(cache=True, inline="always")
 def _copy_side(rec, state, c, slot, q, Z, d):
     """What a face reads of the record of cell c: its state into q[:nc] and its impedance along
-    the face direction ``slot`` into Z (10 of a 2D record's 39 numbers); whether it is admissible."""
+    the face direction ``slot`` into Z (10 of a 2D record's 39 numbers, all in its face part);
+    whether it is admissible."""
+    face = rec[0]
     for k in range(d * d + d):
-        q[k] = rec[c, k]
+        q[k] = face[c, k]
     o = _impedance_at(d, slot)
     for i in range(d):
         for j in range(d):
-            Z[i, j] = rec[c, o + i * d + j]
+            Z[i, j] = face[c, o + i * d + j]
     return state[c] == 1
 
 
@@ -223,14 +243,15 @@ def _record_pair(r, slots, slot):
 
 def cell_records(dofs, U, Q, rho, cell_material, laws, params, normals, rec, state):
     """The side record of every cell whose nodes hold one state (bit for bit: one particle in the
-    cell, or a uniform field), into rec (n_cells, `record_width`): every face of such a cell sees
+    cell, or a uniform field), into rec = (face parts (n_cells, `face_width`), split parts
+    (n_cells, `record_width` less that, 0 without the split)): every face of such a cell sees
     that state, so its tangent and impedances are computed once, not at each of its faces. state
     (n_cells,) int8: 0 the nodes differ (the faces compute their traces' records), 1 recorded,
     2 recorded but an acoustic tensor is not positive definite. dofs (n_cells, nodes per cell);
-    normals (n_cells, slots, d) the cell's face directions; the records' width says whether
-    they hold the split part (`record_width`)."""
+    normals (n_cells, slots, d) the cell's face directions; the split parts' width says whether
+    the records hold them."""
     d, slots = normals.shape[2], normals.shape[1]
-    split = rec.shape[1] == record_width(d, slots, True)
+    split = rec[1].shape[1] > 0
     kernel = _cell_records(d, slots, dofs.shape[1], split, only_law(laws))
     kernel(dofs, U, Q, rho, cell_material, laws, params, normals, rec, state)
 
@@ -389,13 +410,16 @@ def cell_corrections(sources, scale, signs, rec, normals, W, corr_bnd):
 
 @kernel_factory
 def _cell_corrections(slots):
-    width = record_width(2, slots)
+    width, fw = record_width(2, slots), face_width(2, slots)
 
     def cell_corrections(sources, scale, signs, rec, normals, W, corr_bnd):
         r, C, w, n, S = scratch((width,)), scratch((2, 2, 2, 2)), scratch((4, 6)), scratch((4, 2)), scratch((6,))
+        face, rest = rec
         for c in range(len(sources)):
-            for k in range(width):
-                r[k] = rec[c, k]
+            for k in range(fw):
+                r[k] = face[c, k]
+            for k in range(width - fw):
+                r[fw + k] = rest[c, k]
             for k in range(4):                  # the fluctuations entering through the four faces, scaled
                 s = sources[c, k]
                 for i in range(6):
