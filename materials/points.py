@@ -1,15 +1,17 @@
 """Compiled point laws: one material's stress or tangent at one point, chosen by the law's ``law_id``.
 
 A law's point functions are its class's ``point_law`` (`base.PointLaw`), and the law is
-registered once, by its row in `materials.LAWS`: every dispatch below is made from that table. Kernels that loop over points or faces themselves (the DGMPM face and particle
-passes, the health check) evaluate the law inside their loop through `tangent_point` (1D:
-`tangent_call`); a set of materials is handed to them as a table (`law_table`): one row of (law
-id, parameters) per material, and each such kernel is made for the law its materials share,
-where they share one (`only_law`): only that law's code is left in its loop.
+registered once, by its row in `materials.LAWS`: every dispatch below is made from that table.
+Kernels that loop over points or faces themselves (the DGMPM face and particle passes, the health
+check) evaluate the law inside their loop through `tangent_point` (1D: `tangent_call`); a set of
+materials is handed to them as a table (`law_table`): one row of (law id, parameters) per
+material, and each such kernel is made for the law its materials share, where they share one
+(`only_law`): only that law's code is left in its loop.
 
 A kernel made for one law types and compiles that law's code alone; one made for several
-(`ANY_LAW`) compiles a chain of every registered law's branch (laws sharing a function, e.g. a
-Riemann tangent, share a branch), twice per pass where it has a literal-d branch. A law's point
+(`ANY_LAW`) compiles an if/elif on each point's law id over every registered law's branch (laws
+sharing a function, e.g. a Riemann tangent, share a branch), twice per pass where it has a
+literal-d branch. A law's point
 functions are inlined where they are declared ``inline="always"`` (the four laws of the
 benchmarks: their speed matters in those passes); a law declared without is called as a
 compiled function of its own, cheap to compile once, a little slower per call.
@@ -62,10 +64,13 @@ def _parameters(params, m):
 
 
 # ---------------------------------------------------------------- the dispatch, made from LAWS
-# What a point function computes (``kind``) and the arguments after (F, prm) it takes.
+# What a point function computes (``kind``) and the arguments after (F, prm) it takes; the
+# arguments after (F, prm) of each point function of a `base.PointLaw`.
 TANGENT, STRESS, UPDATE, STRESS_TANGENT = range(4)
 _ARGUMENTS = {TANGENT: ("C", "d"), STRESS: ("P", "d"), UPDATE: ("h_n", "h", "P", "d"),
               STRESS_TANGENT: ("h_n", "h", "P", "C", "d")}
+_TAKES = {"tangent": _ARGUMENTS[TANGENT], "stress": _ARGUMENTS[STRESS], "update": _ARGUMENTS[UPDATE],
+          "stress_tangent": ("P", "C", "d")}
 
 
 def _statements(kind, law):
@@ -74,10 +79,13 @@ def _statements(kind, law):
     without history updates by its stress (its history, zero wide, unread); one without a joint
     stress and tangent computes them apart."""
     e = LAWS[law]
-    tangent = ((e.tangent, ("F", "prm", "C", "d")),)
-    stress = None if e.stress is None else ((e.stress, ("F", "prm", "P", "d")),)
-    update = ((e.update, ("F", "prm", "h_n", "h", "P", "d")),) if e.update else stress
-    both = ((e.stress_tangent, ("F", "prm", "P", "C", "d")),) if e.stress_tangent else update + tangent
+
+    def call(name):
+        return ((getattr(e, name), ("F", "prm", *_TAKES[name])),)
+    tangent = call("tangent")
+    stress = None if e.stress is None else call("stress")
+    update = call("update") if e.update else stress
+    both = call("stress_tangent") if e.stress_tangent else update + tangent
     return (tangent, stress, update, both)[kind]
 
 
@@ -93,10 +101,11 @@ def _branches(kind, laws=KNOWN):
 
 
 @functools.cache
-def _impl(kind, only, signature, sides):
-    """The body of an overload of ``kind`` whose parameters are ``signature``, for a kernel made
-    for law ``only`` (`_typed_for`): per side (material, F and the kind's arguments
-    (`_ARGUMENTS`), as the signature names them), that law's point functions called, or for
+def _impl(kind, only, sides):
+    """The body of an overload of ``kind`` for a kernel made for law ``only`` (`_typed_for`): per
+    side (material, F and the kind's arguments (`_ARGUMENTS`), as the overload names them; its
+    parameters are the law table, the sides' materials, ``only``, their Fs, their arguments but
+    the last, d (`_signature`)), that law's point functions called, or for
     ANY_LAW an if/elif on the side's law id over the branches of ``kind`` (`_branches`), the last
     taken unasked (`law_table` admits no other id). Its source is written from the table, the
     law's functions called in it directly: every wrapper between a kernel and a law is one more
@@ -105,7 +114,7 @@ def _impl(kind, only, signature, sides):
     branches = _branches(kind, KNOWN if only == ANY_LAW else (only,))
     if not branches:                        # a law with history asked for STRESS
         raise TypeError(f"law {only} has no point function of kind {kind}")
-    namespace, lines = {"_parameters": _parameters}, [f"def impl({signature}):"]
+    namespace, lines = {"_parameters": _parameters}, [f"def impl({_signature(sides)}):"]
     for s, (m, F, arguments) in enumerate(sides):
         names = dict(zip(_ARGUMENTS[kind], arguments), F=F, prm=f"prm_{s}_")
         lines.append(f"    prm_{s}_ = _parameters(params_, {m})")
@@ -122,6 +131,13 @@ def _impl(kind, only, signature, sides):
                 lines.append(f"{indent}law_{k}_{j}(" + ", ".join(names[a] for a in parameters) + ")")
     exec("\n".join(lines), namespace)
     return namespace["impl"]
+
+
+def _signature(sides):
+    """An overload's parameters from its sides (`_impl`): the names of (laws, params), the
+    sides' materials, only, their Fs, their arguments but d, d."""
+    return ", ".join(("laws_", "params_", *(m for m, _, _ in sides), "only_", *(F for _, F, _ in sides),
+                      *(a for _, _, arguments in sides for a in arguments[:-1]), "d_"))
 
 
 # The overloads are typed for the literals of the kernel that inlines them (prefer_literal). Their
@@ -166,39 +182,35 @@ def stress_tangent_point(laws, params, m, only, F, h_n, h, P, C, d):
     raise TypeError("stress_tangent_point is compiled code's")
 
 
-# Each overload: its signature, and per side (material, F, the kind's arguments) as it names them.
+# Each overload: per side (material, F, the kind's arguments) as it names them (its signature).
 @overload(tangent_point, inline="always", prefer_literal=True)
 def _tangent_point(laws_, params_, m_, only_, F_, C_, d_):
-    return _impl(TANGENT, _typed_for(only_), "laws_, params_, m_, only_, F_, C_, d_", (("m_", "F_", ("C_", "d_")),))
+    return _impl(TANGENT, _typed_for(only_), (("m_", "F_", ("C_", "d_")),))
 
 
 @overload(tangent_points, inline="always", prefer_literal=True)
 def _tangent_points(laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, C_L_, C_R_, d_):
-    return _impl(TANGENT, _typed_for(only_), "laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, C_L_, C_R_, d_",
-                 (("m_L_", "F_L_", ("C_L_", "d_")), ("m_R_", "F_R_", ("C_R_", "d_"))))
+    return _impl(TANGENT, _typed_for(only_), (("m_L_", "F_L_", ("C_L_", "d_")), ("m_R_", "F_R_", ("C_R_", "d_"))))
 
 
 @overload(stress_point, inline="always", prefer_literal=True)
 def _stress_point(laws_, params_, m_, only_, F_, P_, d_):
-    return _impl(STRESS, _typed_for(only_), "laws_, params_, m_, only_, F_, P_, d_", (("m_", "F_", ("P_", "d_")),))
+    return _impl(STRESS, _typed_for(only_), (("m_", "F_", ("P_", "d_")),))
 
 
 @overload(stress_points, inline="always", prefer_literal=True)
 def _stress_points(laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, P_L_, P_R_, d_):
-    return _impl(STRESS, _typed_for(only_), "laws_, params_, m_L_, m_R_, only_, F_L_, F_R_, P_L_, P_R_, d_",
-                 (("m_L_", "F_L_", ("P_L_", "d_")), ("m_R_", "F_R_", ("P_R_", "d_"))))
+    return _impl(STRESS, _typed_for(only_), (("m_L_", "F_L_", ("P_L_", "d_")), ("m_R_", "F_R_", ("P_R_", "d_"))))
 
 
 @overload(stress_update_point, inline="always", prefer_literal=True)
 def _stress_update_point(laws_, params_, m_, only_, F_, h_n_, h_, P_, d_):
-    return _impl(UPDATE, _typed_for(only_), "laws_, params_, m_, only_, F_, h_n_, h_, P_, d_",
-                 (("m_", "F_", ("h_n_", "h_", "P_", "d_")),))
+    return _impl(UPDATE, _typed_for(only_), (("m_", "F_", ("h_n_", "h_", "P_", "d_")),))
 
 
 @overload(stress_tangent_point, inline="always", prefer_literal=True)
 def _stress_tangent_point(laws_, params_, m_, only_, F_, h_n_, h_, P_, C_, d_):
-    return _impl(STRESS_TANGENT, _typed_for(only_), "laws_, params_, m_, only_, F_, h_n_, h_, P_, C_, d_",
-                 (("m_", "F_", ("h_n_", "h_", "P_", "C_", "d_")),))
+    return _impl(STRESS_TANGENT, _typed_for(only_), (("m_", "F_", ("h_n_", "h_", "P_", "C_", "d_")),))
 
 
 @njit(cache=True)
