@@ -15,6 +15,18 @@ step evaluates (Euler 1, RK2 2, RK4 4, ADER 1 predictor + corrector). Each row r
 number of threads (``--threads 1,2``; `skdgmpm.parallel`): a one-thread row's CPU time per cell
 is the cost per core, and the rows of several thread counts give the speed-up (same bits for
 any count). Timings are measurements on the machine at hand, never test results.
+
+A peer row (Clawpack/PyClaw, `skdgmpm.peer`) asked for beside its counterpart (``--methods
+dgmpm-ctu,pyclaw-ctu``) also gets a paired measurement at each size (`measure_pair`): one more
+fresh process runs both schemes on the same plate, alternating one step of each (ABBA, after
+``warmup`` pairs; ours on one thread), so the ratio is taken between steps milliseconds apart
+instead of rows seconds apart. It times `peer.pairs_for` (``steps``, at least 30) pairs. The JSON
+keeps the rows as they are and adds a top-level ``paired`` list, one dict per (peer, size):
+``method`` ("dgmpm-ctu/pyclaw-ctu"), ``pair`` ([ours, peer]), ``cells``, ``pairs``, ``order``;
+for each clock (``cpu``, ``wall``) the quartiles of the per-pair ratios ours / peer
+(``cpu_ratio_q25``, ``cpu_ratio_median``, ``cpu_ratio_q75``), the ratio of the two medians
+(``cpu_medians_ratio``), the median step of each side (``cpu_step_s``: {"ours", "peer"}) and every
+timed step (``cpu_s``: {"ours": [...], "peer": [...]}, pair k at index k).
 """
 import json
 import multiprocessing
@@ -55,23 +67,29 @@ METHODS["dgmpm-ctu-j2"] = [*METHODS["dgmpm-ctu"], *J2]
 METHODS["ader-dgmpm-1-j2"] = [*METHODS["ader-dgmpm-1"], *J2]
 
 
+def scene_for(method, n):
+    """The bench's plate on n x n cells, set for ``method`` (a name of `METHODS`)."""
+    from .scene import load_scene
+
+    return load_scene(SCENE, [*BASE, f"grid.cells=[{n}, {n}]", *METHODS[method]])
+
+
 def _measure(method, n, steps, warmup, threads=1):
     """One benchmark in this process, its passes on ``threads`` threads: returns a row (dict)."""
     if method in peer.METHODS:          # Clawpack/PyClaw on the same plate (serial): skdgmpm.peer
         return peer.measure_here(method, n, steps, warmup)
     from . import parallel
     from .build import build
-    from .scene import load_scene
 
     parallel.set_threads(threads)
     # once per process, not per grid: imports and loading the compiled kernels from numba's
     # cache, paid by a tiny run of the same method (a study building many grids pays it once)
     t0 = time.perf_counter()
-    tiny = build(load_scene(SCENE, [*BASE, "grid.cells=[4, 4]", *METHODS[method]]))
+    tiny = build(scene_for(method, 4))
     tiny.stepper.step(tiny.initial)
     startup = time.perf_counter() - t0
     base_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    scene = load_scene(SCENE, [*BASE, f"grid.cells=[{n}, {n}]", *METHODS[method]])
+    scene = scene_for(method, n)
     t0 = time.perf_counter()
     disc = build(scene)
     setup = time.perf_counter() - t0
@@ -105,11 +123,23 @@ def _measure(method, n, steps, warmup, threads=1):
             "stage_s": per_stage}                   # mean wall time per step of each stage (its own)
 
 
-def _child(queue, *args):
+def _child(queue, task, *args):
     try:
-        queue.put(_measure(*args))
+        queue.put(task(*args))
     except BaseException as exc:        # report, never hang the parent
         queue.put({"error": f"{type(exc).__name__}: {exc}"})
+
+
+def _spawned(task, *args):
+    """``task(*args)`` in a fresh process (spawned, so its peak memory is its own): its row, or
+    ``{"error": ...}``."""
+    ctx = multiprocessing.get_context("spawn")
+    queue = ctx.Queue()
+    proc = ctx.Process(target=_child, args=(queue, task, *args))
+    proc.start()
+    row = queue.get()
+    proc.join()
+    return row
 
 
 def measure(method, n, steps=5, warmup=2, threads=1):
@@ -118,14 +148,19 @@ def measure(method, n, steps=5, warmup=2, threads=1):
         raise InputError(f"--methods: {method!r} is not a benchmark (known: {', '.join([*METHODS, *peer.METHODS])})")
     if method in peer.METHODS and not peer.available():
         return peer.missing_row(method, n)
-    ctx = multiprocessing.get_context("spawn")
-    queue = ctx.Queue()
-    proc = ctx.Process(target=_child, args=(queue, method, n, steps, warmup, threads))
-    proc.start()
-    row = queue.get()
-    proc.join()
+    row = _spawned(_measure, method, n, steps, warmup, threads)
     if "error" in row:
         return {"method": method, "cells": n * n, "threads": threads, "error": row["error"]}
+    return row
+
+
+def measure_pair(method, n, steps=5, warmup=2):
+    """The peer ``method`` and its counterpart stepping in turn in one fresh process
+    (`peer.measure_pair_here`): a paired row (dict)."""
+    row = _spawned(peer.measure_pair_here, method, n, steps, warmup)
+    if "error" in row:
+        pair = [peer.COUNTERPART[method], method]
+        return {"method": "/".join(pair), "pair": pair, "cells": n * n, "threads": 1, "error": row["error"]}
     return row
 
 
@@ -224,13 +259,17 @@ def format_scaling(rows):
 
 
 def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threads=(1,)):
-    """Run every (method, size, thread count); write JSON if asked. Returns the rows and, with
-    several thread counts, the memory bandwidth on each (`memory_bandwidth`, else {}). The CPU
-    time per cell of a one-thread row is the cost per core."""
+    """Run every (method, size, thread count), then at each size every requested peer method whose
+    counterpart is requested too, paired (`measure_pair`; not without the peer); write JSON if asked.
+    Returns the rows, the paired rows and, with several thread counts, the memory bandwidth on each
+    (`memory_bandwidth`, else {}). The CPU time per cell of a one-thread row is the cost per core."""
     from .run import progress_bar
 
-    rows = []
-    bar = progress_bar(progress, len(methods) * len(sizes) * len(threads), unit="run")
+    pairs = [m for m in methods if m in peer.METHODS and peer.COUNTERPART[m] in methods]
+    if pairs and not peer.available():
+        pairs = []                      # the peer rows say MISSING; no paired row
+    rows, paired = [], []
+    bar = progress_bar(progress, len(sizes) * (len(methods) * len(threads) + len(pairs)), unit="run")
     for n in sizes:                     # methods interleaved at each size (a peer beside ours)
         for method in methods:
             for t in threads:
@@ -240,10 +279,15 @@ def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threa
                 bar.set_description(f"{method} {n}x{n} {t} thread{'s' if t > 1 else ''}")
                 rows.append(measure(method, n, steps, warmup, t))
                 bar.update()
+        for method in pairs:
+            bar.set_description(f"{peer.COUNTERPART[method]}/{method} {n}x{n} paired")
+            paired.append(measure_pair(method, n, steps, warmup))
+            bar.update()
     bar.close()
     memory = memory_bandwidth(threads) if len(threads) > 1 else {}
     if json_path is not None:
         info = {**machine(), "memory_GBps": {str(t): g for t, g in memory.items()}, "memory_MiB": MEMORY_MIB}
         with open(json_path, "w") as fh:
-            json.dump({"machine": info, "steps": steps, "warmup": warmup, "rows": rows}, fh, indent=1)
-    return rows, memory
+            json.dump({"machine": info, "steps": steps, "warmup": warmup, "rows": rows, "paired": paired}, fh,
+                      indent=1)
+    return rows, paired, memory

@@ -152,8 +152,8 @@ def _cmd_bench(args):
     sizes = study._int_list(args.sizes, "--sizes")
     cores = parallel.available()
     threads = study._int_list(args.threads, "--threads") if args.threads else sorted({1, cores})
-    rows, memory = bench.main(methods, sizes, steps=args.steps, warmup=args.warmup, json_path=args.json,
-                              progress=not args.quiet, threads=threads)
+    rows, paired, memory = bench.main(methods, sizes, steps=args.steps, warmup=args.warmup, json_path=args.json,
+                                      progress=not args.quiet, threads=threads)
     m = bench.machine()
     print(f"{m['processor']}, {m['cpus']} CPUs, Python {m['python']}")
     print(bench.format_table(rows))
@@ -162,7 +162,7 @@ def _cmd_bench(args):
     if scaling:
         print("\nthreads (wall time per step, speed-up over one thread):\n" + scaling)
         print(bench.format_memory(memory))
-    ratio = peer.format_ratio(rows)
+    ratio = peer.format_ratio(rows, paired)
     if ratio:
         print("\nours / peer (CPU time per cell and step, one core):\n" + ratio)
     return 0

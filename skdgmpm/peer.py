@@ -26,6 +26,14 @@ CPU and wall time of each ``solver.evolve_to_time(solution)`` call (one step: bo
 the Fortran step, copies) after ``warmup`` steps, median over ``steps`` steps. The peer is serial,
 so its row is a one-thread row whatever ``--threads`` says.
 
+Rows run one after the other, seconds apart, and on a shared machine the ratio of two rows swings
+with the load (0.81-1.47 over rounds whose minima agree within 6 %). So when a peer method and its
+counterpart are both asked for, the bench also measures them paired (`measure_pair_here`): both
+built on the same plate in one process, ours on one thread, stepping in turn (ABBA) after warm-up,
+each step's CPU and wall time recorded; the ratio of two steps taken milliseconds apart sees the
+same load. Its line reports the median per-pair CPU ratio, its quartiles and the ratio of the two
+medians.
+
 Clawpack is an optional dependency (``pip install '.[peer]'``); it is built from source and needs a
 Fortran compiler. Without it the peer rows say so (``MISSING``) and the other rows run.
 """
@@ -48,6 +56,7 @@ EQUATIONS = 5          # sigma_11, sigma_22, sigma_12, u, v
 OUR_EQUATIONS = 6      # DGMPM's 2D finite-strain system: velocity (2) and deformation gradient (4)
 CFL = 0.9
 NUM_GHOST = 2
+PAIRS = 30             # the fewest timed pairs of a paired measurement (`pairs_for`)
 
 
 def available():
@@ -214,20 +223,15 @@ def measure_here(method, n, steps, warmup):
     """One peer benchmark in this process (the bench spawns it): a bench row (dict)."""
     import numpy as np
 
-    from .bench import BASE, METHODS as OURS, SCENE
-    from .scene import load_scene
+    from .bench import scene_for
 
     settings = METHODS[method]
-
-    def scene(cells):
-        return load_scene(SCENE, [*BASE, f"grid.cells=[{cells}, {cells}]", *OURS[COUNTERPART[method]]])
-
     t0 = time.perf_counter()
-    tiny_solver, tiny = build(problem(scene(4)), **settings)     # imports, loading the Fortran
+    tiny_solver, tiny = build(problem(scene_for(COUNTERPART[method], 4)), **settings)  # imports, the Fortran
     tiny_solver.evolve_to_time(tiny)
     startup = time.perf_counter() - t0
     base_rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-    prob = problem(scene(n))
+    prob = problem(scene_for(COUNTERPART[method], n))
     t0 = time.perf_counter()
     solver, solution = build(prob, **settings)
     setup = time.perf_counter() - t0
@@ -254,23 +258,93 @@ def measure_here(method, n, steps, warmup):
             "max_speed": float(np.sqrt(q[3] ** 2 + q[4] ** 2).max())}
 
 
+def pairs_for(steps):
+    """Timed pairs of a paired measurement: ``steps``, at least `PAIRS`, rounded up to even (ABBA).
+    The median of 30 per-pair ratios has a standard error of about a sixth of their interquartile
+    range (1.25 sigma / sqrt(30) for a normal spread; quartiles 0.95-1.10 at 256^2 on a shared host:
+    about 0.02), and 30 pairs at 256^2 cost about a second."""
+    pairs = max(steps, PAIRS)
+    return pairs + pairs % 2
+
+
+def measure_pair_here(method, n, steps, warmup):
+    """The peer ``method`` and its counterpart (`COUNTERPART`, on one thread) built on the same n x n
+    plate in this process (the bench spawns it), stepping in turn: ``warmup`` pairs, then
+    ``pairs_for(steps)`` timed pairs in ABBA order, each step's CPU and wall time recorded. Returns a
+    paired row (dict): the quartiles of the per-pair ratios ours / peer and the ratio of the medians."""
+    import numpy as np
+
+    from . import parallel
+    from .bench import scene_for
+    from .build import build as build_ours
+
+    parallel.set_threads(1)             # the peer is serial: cost per core against cost per core
+    ours = COUNTERPART[method]
+    scene = scene_for(ours, n)
+    disc = build_ours(scene)
+    solver, solution = build(problem(scene), **METHODS[method])
+    stepper, state = disc.stepper, disc.initial
+
+    def step_ours():
+        nonlocal state
+        state = stepper.step(state)
+
+    steppers = (step_ours, lambda: solver.evolve_to_time(solution))
+    pairs = pairs_for(steps)
+    cpu, wall = np.zeros((2, pairs)), np.zeros((2, pairs))      # [ours, peer] x pair
+    for k in range(warmup + pairs):
+        # ABBA: each side first in half of the pairs, so an order effect (caches, the other side's
+        # leftovers; the second step of a pair ran 3-6 % slower at 256^2) falls on both alike
+        for side in ((0, 1), (1, 0))[k % 2]:
+            t0, c0 = time.perf_counter(), time.process_time()
+            steppers[side]()
+            if k >= warmup:
+                wall[side, k - warmup] = time.perf_counter() - t0
+                cpu[side, k - warmup] = time.process_time() - c0
+    row = {"method": f"{ours}/{method}", "pair": [ours, method], "peer": f"clawpack {version()}",
+           "cells": n * n, "threads": 1, "pairs": pairs, "warmup": warmup, "order": "ABBA"}
+    for clock, times in (("cpu", cpu), ("wall", wall)):
+        q25, median, q75 = np.percentile(times[0] / times[1], [25, 50, 75])
+        ours_s, peer_s = np.median(times, axis=1)
+        row.update({f"{clock}_ratio_median": float(median), f"{clock}_ratio_q25": float(q25),
+                    f"{clock}_ratio_q75": float(q75), f"{clock}_medians_ratio": float(ours_s / peer_s),
+                    f"{clock}_step_s": {"ours": float(ours_s), "peer": float(peer_s)},
+                    f"{clock}_s": {"ours": times[0].tolist(), "peer": times[1].tolist()}})
+    return row
+
+
 def missing_row(method, n):
     return {"method": method, "cells": n * n, "threads": 1, "error": MISSING, "missing": True}
 
 
-def format_ratio(rows):
+def format_ratio(rows, paired=()):
     """For each peer row, our counterpart's one-thread CPU time per cell and step over the peer's
-    (same size): how many times slower (> 1) or faster (< 1) we are per core."""
+    (same size): how many times slower (> 1) or faster (< 1) we are per core; after it, the paired
+    measurement of the same size if any (`measure_pair_here`: steps alternating in one process)."""
     ours = {(r["method"], r["cells"]): r for r in rows if "error" not in r and r.get("threads", 1) == 1}
+    pairs = {(p["pair"][1], p["cells"]): p for p in paired}
     lines = []
     for r in rows:
         if r["method"] not in METHODS or "error" in r:
             continue
         other = ours.get((COUNTERPART[r["method"]], r["cells"]))
-        if other is None:
-            continue
-        a, b = other["cpu_us_per_cell_step"], r["cpu_us_per_cell_step"]
-        lines.append(f"{other['method']} / {r['method']} ({r.get('peer', 'clawpack')}), {r['cells']} cells, "
-                     f"one thread: {a / b:.2f} (CPU {a:.3f} / {b:.3f} us per cell and step; "
-                     f"per equation {a / OUR_EQUATIONS:.3f} / {b / EQUATIONS:.3f})")
-    return "\n".join(lines)
+        if other is not None:
+            a, b = other["cpu_us_per_cell_step"], r["cpu_us_per_cell_step"]
+            lines.append(f"{other['method']} / {r['method']} ({r.get('peer', 'clawpack')}), {r['cells']} cells, "
+                         f"one thread: {a / b:.2f} (CPU {a:.3f} / {b:.3f} us per cell and step; "
+                         f"per equation {a / OUR_EQUATIONS:.3f} / {b / EQUATIONS:.3f})")
+        if (r["method"], r["cells"]) in pairs:
+            lines.append(format_pair(pairs.pop((r["method"], r["cells"]))))
+    return "\n".join([*lines, *map(format_pair, pairs.values())])
+
+
+def format_pair(p):
+    """One line of a paired row: the median per-pair CPU ratio ours / peer, its quartiles, the ratio
+    of the two medians."""
+    head = f"{p['pair'][0]} / {p['pair'][1]}, {p['cells']} cells, paired, alternating steps in one process"
+    if "error" in p:
+        return f"{head}: failed: {p['error']}"
+    ours, theirs = p["cpu_step_s"]["ours"], p["cpu_step_s"]["peer"]
+    return (f"{head}: {p['cpu_ratio_median']:.2f} (median of {p['pairs']} per-pair CPU ratios, {p['order']} order; "
+            f"quartiles {p['cpu_ratio_q25']:.2f}-{p['cpu_ratio_q75']:.2f}; ratio of the medians "
+            f"{p['cpu_medians_ratio']:.2f}: CPU {1e3 * ours:.2f} / {1e3 * theirs:.2f} ms per step)")

@@ -72,6 +72,43 @@ def test_pyclaw_row_beside_ours(tmp_path, capsys):
     assert row["finite"] and 0 < row["max_speed"] < 2000          # driven at 1000 m/s, 3 steps
     assert math.isclose(row["t"], 3 * row["dt"])
     assert "dgmpm-ctu / pyclaw-ctu (clawpack" in out and "256 cells, one thread" in out
+    # both asked for: one paired row more, in its own list, and its line after the rows' ratio
+    (pair,) = json.load(open(path))["paired"]
+    assert pair["pair"] == ["dgmpm-ctu", "pyclaw-ctu"] and pair["cells"] == 256 and "error" not in pair
+    assert "dgmpm-ctu / pyclaw-ctu, 256 cells, paired, alternating steps in one process: " in out
+
+
+def test_paired_measurement_alternates_steps_in_one_process():
+    _require_clawpack()
+    pair = bench.measure_pair("pyclaw-ctu", 8, steps=3, warmup=1)
+    assert "error" not in pair, pair.get("error")
+    assert pair["method"] == "dgmpm-ctu/pyclaw-ctu" and pair["cells"] == 64 and pair["threads"] == 1
+    assert pair["pairs"] == peer.pairs_for(3) == peer.PAIRS and pair["order"] == "ABBA"
+    for clock in ("cpu", "wall"):
+        assert all(len(pair[f"{clock}_s"][side]) == pair["pairs"] for side in ("ours", "peer"))
+        assert all(t > 0 for side in ("ours", "peer") for t in pair[f"{clock}_s"][side])
+        q25, median, q75 = (pair[f"{clock}_ratio_{q}"] for q in ("q25", "median", "q75"))
+        assert 0 < q25 <= median <= q75 and math.isfinite(q75)
+        assert 0 < pair[f"{clock}_medians_ratio"] < math.inf
+    assert peer.pairs_for(31) == 32 and peer.pairs_for(40) == 40      # even: ABBA balanced
+
+
+def test_ratio_line_of_a_paired_row():
+    """Pure formatting, fabricated numbers: the rows' ratio, then the paired one of the same size."""
+    rows = [{"method": "dgmpm-ctu", "cells": 65536, "threads": 1, "cpu_us_per_cell_step": 0.2},
+            {"method": "pyclaw-ctu", "cells": 65536, "threads": 1, "cpu_us_per_cell_step": 0.16,
+             "peer": "clawpack 5.14.0"}]
+    pair = {"method": "dgmpm-ctu/pyclaw-ctu", "pair": ["dgmpm-ctu", "pyclaw-ctu"], "cells": 65536, "threads": 1,
+            "pairs": 30, "order": "ABBA", "cpu_ratio_q25": 0.98, "cpu_ratio_median": 1.031, "cpu_ratio_q75": 1.08,
+            "cpu_medians_ratio": 1.02, "cpu_step_s": {"ours": 0.0124, "peer": 0.01216}}
+    rows_line, pair_line = peer.format_ratio(rows, [pair]).splitlines()
+    assert rows_line.startswith("dgmpm-ctu / pyclaw-ctu (clawpack 5.14.0), 65536 cells, one thread: 1.25 ")
+    assert pair_line == ("dgmpm-ctu / pyclaw-ctu, 65536 cells, paired, alternating steps in one process: 1.03 "
+                         "(median of 30 per-pair CPU ratios, ABBA order; quartiles 0.98-1.08; "
+                         "ratio of the medians 1.02: CPU 12.40 / 12.16 ms per step)")
+    assert peer.format_ratio(rows[:1], [pair]) == pair_line          # the peer's row failed: still said
+    failed = {"method": "dgmpm-ctu/pyclaw-ctu", "pair": ["dgmpm-ctu", "pyclaw-ctu"], "cells": 64, "error": "boom"}
+    assert peer.format_ratio([], [failed]).endswith("paired, alternating steps in one process: failed: boom")
 
 
 def test_pyclaw_solves_the_bench_problem():
