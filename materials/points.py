@@ -11,10 +11,10 @@ material, and each such kernel is made for the law its materials share, where th
 A kernel made for one law types and compiles that law's code alone; one made for several
 (`ANY_LAW`) compiles an if/elif on each point's law id over every registered law's branch (laws
 sharing a function, e.g. a Riemann tangent, share a branch), twice per pass where it has a
-literal-d branch. A law's point
-functions are inlined where they are declared ``inline="always"`` (the four laws of the
-benchmarks: their speed matters in those passes); a law declared without is called as a
-compiled function of its own, cheap to compile once, a little slower per call.
+literal-d branch. A law's point functions are inlined where they are declared
+``inline="always"`` (the four laws of the benchmarks: their speed matters in those passes); a
+law declared without is called as a compiled function of its own, cheap to compile once, a
+little slower per call.
 """
 import functools
 

@@ -42,7 +42,7 @@ from skdgmpm.materials.points import law_table
 from . import parallel, system
 from .dgmpm_kernels import (boundary_edge_corrections, boundary_pass, boundary_sides, cell_corrections, cell_records,
                             cell_update, euler_update, face_width, integrate_faces, interior_pass,
-                            record_width)
+                            split_width)
 from .errors import InputError
 from .faces import interior_faces
 from .integrators import INTEGRATORS
@@ -184,7 +184,7 @@ class DGMPM(GodunovScheme):
         describe once the step is accepted; `interface_flux` computes them for any other state."""
         d, slots = self.d, self.cell_normals.shape[1]
         n_cells, face = len(self.cell_dofs), face_width(d, slots)
-        rest = record_width(d, slots, self.ctu is not None) - face
+        rest = split_width(d, slots, self.ctu is not None)
         return ((self._buffer("records", (n_cells, face)), self._buffer("records' split parts", (n_cells, rest))),
                 self._buffer("record states", n_cells, np.int8))
 
@@ -309,7 +309,7 @@ class DGMPM(GodunovScheme):
         if made is None or made[0] is not grid_state.U or made[1] is not grid_state.Q:
             parallel.rows(n_cells, lambda lo, hi: cell_records(
                 dofs[lo:hi], grid_state.U, grid_state.Q, rho, self.cell_material[lo:hi], *laws, normals[lo:hi],
-                (rec[0][lo:hi], rec[1][lo:hi]), state[lo:hi]))
+                _rows(rec, lo, hi), state[lo:hi]))
         recorded = bool(np.all(state != 0))         # one particle per cell: the faces read no trace
         # CTU: with every cell recorded, the faces keep their fluctuations (nf, 2, nc) and each cell
         # sends the parts of those entering it (`cell_corrections`), in place; otherwise the faces
@@ -335,7 +335,7 @@ class DGMPM(GodunovScheme):
             sources, scale, signs = self.cell_sources
             W = G.reshape(-1, nc)
             parallel.rows(n_cells, lambda lo, hi: cell_corrections(
-                sources[lo:hi], scale[lo:hi], signs[lo:hi], (rec[0][lo:hi], rec[1][lo:hi]), normals[lo:hi], W,
+                sources[lo:hi], scale[lo:hi], signs[lo:hi], _rows(rec, lo, hi), normals[lo:hi], W,
                 corr_bnd))
             return flux, G, corr_bnd
         if ctu:
@@ -562,6 +562,11 @@ class DGMPM(GodunovScheme):
 
 
 _NO_TRACE = (np.zeros(1, np.int32), np.zeros(0, np.int32), np.zeros(0))    # an empty CSR triple: not read
+
+
+def _rows(rec, lo, hi):
+    """Rows lo:hi of the cell records rec = (face parts, split parts)."""
+    return rec[0][lo:hi], rec[1][lo:hi]
 
 
 def _local_face(mesh, cells, facets):

@@ -91,6 +91,24 @@ def _add_boundary_edges(edge_bnd, f, G_0, G_1, corr_bnd):
 # reads 112 bytes of each of its cells' rows, in rows of 112 bytes, not of 312 (the split part
 # between them would be half the lines it pulls from memory).
 @njit(cache=True, inline="always")
+def face_width(d, slots):
+    """Entries of a side record's face part (the first array of the cell records)."""
+    return d * d + d + d * d * slots
+
+
+@njit(cache=True, inline="always")
+def split_width(d, slots, split=True):
+    """Entries of a side record's split part (the second array): 1 / rho, C, Z^-1 per face
+    direction; none without ``split`` (DCU)."""
+    return (1 + d ** 4 + d * d * slots) if split else 0
+
+
+def record_width(d, slots, split=True):
+    """Entries of one side record: its face part, and with ``split`` (CTU) its split part."""
+    return face_width(d, slots) + split_width(d, slots, split)
+
+
+@njit(cache=True, inline="always")
 def _impedance_at(d, slot):
     """Where Z along the face direction ``slot`` starts."""
     return d * d + d + d * d * slot
@@ -98,18 +116,18 @@ def _impedance_at(d, slot):
 
 @njit(cache=True, inline="always")
 def _inv_rho_at(d, slots):
-    return d * d + d + d * d * slots
+    return face_width(d, slots)
 
 
 @njit(cache=True, inline="always")
 def _tangent_at(d, slots):
-    return d * d + d + d * d * slots + 1
+    return _inv_rho_at(d, slots) + 1
 
 
 @njit(cache=True, inline="always")
 def _inverse_impedance_at(d, slots, slot):
     """Where Z^-1 along the face direction ``slot`` starts (a split record)."""
-    return d * d + d + d * d * slots + 1 + d ** 4 + d * d * slot
+    return _tangent_at(d, slots) + d ** 4 + d * d * slot
 
 
 @njit(cache=True, inline="always")
@@ -117,16 +135,6 @@ def _edge_slot(k, e, slots):
     """The face direction of the edge e (0, 1) of a quad cell adjacent to its local face k: the
     local faces k + 1 and k + 3 (opposite faces k, k + 2)."""
     return ((k + 1 + 2 * e) % 4) % slots
-
-
-def record_width(d, slots, split=True):
-    """Entries of one side record: its face part, and with ``split`` (CTU) its split part."""
-    return face_width(d, slots) + ((1 + d ** 4 + d * d * slots) if split else 0)
-
-
-def face_width(d, slots):
-    """Entries of a side record's face part (the first array of the cell records)."""
-    return d * d + d + d * d * slots
 
 
 @njit(cache=True, inline="always")
@@ -173,28 +181,25 @@ def write_record(q, rho, C, normals, c, rec, state, n_c, r, d, slots, split):
         for i in range(d):
             n_c[s, i] = normals[c, s, i]
     state[c] = 1 if fill_record(q, rho, C, n_c, r, d, slots, split) else 2
-    # the widths from the literals (`record_width`), not the arrays' shapes: the copies unroll
     face, rest = rec
-    fw = _inv_rho_at(d, slots)
-    for k in range(fw):
+    o = face_width(d, slots)
+    for k in range(o):                  # widths from the literals: the copies unroll
         face[c, k] = r[k]
-    if split:
-        for k in range(_inverse_impedance_at(d, slots, slots) - fw):
-            rest[c, k] = r[fw + k]
+    for k in range(split_width(d, slots, split)):
+        rest[c, k] = r[o + k]
 
 
 @njit(cache=True, inline="always")
-def _copy_record(rec, state, c, r):
+def _copy_record(rec, c, r, d, slots, split):
     """Row c of the cell records rec = (face parts, split parts) into the side record r (stack
-    scratch: no array view, whose reference counting would cost more than the copy); whether it
-    is admissible."""
+    scratch: no array view, whose reference counting would cost more than the copy); with a
+    literal ``split`` the copies unroll."""
     face, rest = rec
-    fw = face.shape[1]
-    for k in range(fw):
+    o = face_width(d, slots)
+    for k in range(o):
         r[k] = face[c, k]
-    for k in range(rest.shape[1]):
-        r[fw + k] = rest[c, k]
-    return state[c] == 1
+    for k in range(split_width(d, slots, split)):
+        r[o + k] = rest[c, k]
 
 
 @njit(cache=True, inline="always")
@@ -244,7 +249,7 @@ def _record_pair(r, slots, slot):
 def cell_records(dofs, U, Q, rho, cell_material, laws, params, normals, rec, state):
     """The side record of every cell whose nodes hold one state (bit for bit: one particle in the
     cell, or a uniform field), into rec = (face parts (n_cells, `face_width`), split parts
-    (n_cells, `record_width` less that, 0 without the split)): every face of such a cell sees
+    (n_cells, `split_width`, 0 without the split)): every face of such a cell sees
     that state, so its tangent and impedances are computed once, not at each of its faces. state
     (n_cells,) int8: 0 the nodes differ (the faces compute their traces' records), 1 recorded,
     2 recorded but an acoustic tensor is not positive definite. dofs (n_cells, nodes per cell);
@@ -338,11 +343,13 @@ def _interior_pass(d, slots, recorded, only):  # literals: the loops unrolled, t
                 if trace_L:                         # a view: rare path
                     ok_L = fill_record(q_L, rho_L, C_L, normals[c_L], s_L, d, slots, ctu)
                 else:
-                    ok_L = _copy_record(rec, state, c_L, s_L)
+                    _copy_record(rec, c_L, s_L, d, slots, ctu)
+                    ok_L = state[c_L] == 1
                 if trace_R:
                     ok_R = fill_record(q_R, rho_R, C_R, normals[c_R], s_R, d, slots, ctu)
                 else:
-                    ok_R = _copy_record(rec, state, c_R, s_R)
+                    _copy_record(rec, c_R, s_R, d, slots, ctu)
+                    ok_R = state[c_R] == 1
                 _record_impedance(s_L, k_L[f] % slots, Z_L, d)
                 _record_impedance(s_R, k_R[f] % slots, Z_R, d)
             if not (ok_L and ok_R):
@@ -410,16 +417,12 @@ def cell_corrections(sources, scale, signs, rec, normals, W, corr_bnd):
 
 @kernel_factory
 def _cell_corrections(slots):
-    width, fw = record_width(2, slots), face_width(2, slots)
+    width = record_width(2, slots)
 
     def cell_corrections(sources, scale, signs, rec, normals, W, corr_bnd):
         r, C, w, n, S = scratch((width,)), scratch((2, 2, 2, 2)), scratch((4, 6)), scratch((4, 2)), scratch((6,))
-        face, rest = rec
         for c in range(len(sources)):
-            for k in range(fw):
-                r[k] = face[c, k]
-            for k in range(width - fw):
-                r[fw + k] = rest[c, k]
+            _copy_record(rec, c, r, 2, slots, True)
             for k in range(4):                  # the fluctuations entering through the four faces, scaled
                 s = sources[c, k]
                 for i in range(6):
