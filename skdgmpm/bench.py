@@ -20,13 +20,31 @@ A peer row (Clawpack/PyClaw, `skdgmpm.peer`) asked for beside its counterpart (`
 dgmpm-ctu,pyclaw-ctu``) also gets a paired measurement at each size (`measure_pair`): one more
 fresh process runs both schemes on the same plate, alternating one step of each (ABBA, after
 ``warmup`` pairs; ours on one thread), so the ratio is taken between steps milliseconds apart
-instead of rows seconds apart. It times `peer.pairs_for` (``steps``, at least 30) pairs. The JSON
+instead of rows seconds apart. It times `pairs_for` (``steps``, at least 30) pairs. The JSON
 keeps the rows as they are and adds a top-level ``paired`` list, one dict per (peer, size):
 ``method`` ("dgmpm-ctu/pyclaw-ctu"), ``pair`` ([ours, peer]), ``cells``, ``pairs``, ``order``;
 for each clock (``cpu``, ``wall``) the quartiles of the per-pair ratios ours / peer
 (``cpu_ratio_q25``, ``cpu_ratio_median``, ``cpu_ratio_q75``), the ratio of the two medians
 (``cpu_medians_ratio``), the median step of each side (``cpu_step_s``: {"ours", "peer"}) and every
 timed step (``cpu_s``: {"ours": [...], "peer": [...]}, pair k at index k).
+
+The speed-up of two rows on different thread counts swings as much on a shared host (1.07-1.93
+over rounds for the same code), so with several thread counts, one thread among them, every
+method but the peer's also gets a paired scaling measurement at each size (`measure_threads`):
+one more fresh process builds the plate once and steps one simulation, switching the thread
+count between steps (the same bits for any count), one step per count a round, the rounds in
+the order of the counts and reversed in turn (ABBA for 1, 2), `pairs_for` timed rounds after
+``warmup``. Its speed-up on t threads is taken between steps milliseconds apart: each round's
+step on one thread over its step on t. (A step after a switch starts with the caches the other
+count left; at 256^2 a step's arrays are far past a core's own caches.) It costs
+len(threads) x (pairs + warmup) steps per method and size, ~10 s for ADER at 256^2. The JSON adds
+a top-level ``threads_paired`` list, one dict per (method, size): ``method``, ``cells``,
+``threads`` (the counts, [1, 2]), ``pairs``, ``warmup``, ``order``; for each clock (``wall``,
+``cpu``) and each count t > 1 (keys are strings, "2"), the quartiles of the per-round speed-ups
+(``wall_speedup``: {"2": {"q25", "median", "q75", "medians_ratio"}}, the last the median step on
+one thread over the median step on t; on the ``cpu`` clock below 1 by the core time the threads
+add), the median step of each count (``wall_step_s``: {"1", "2"}) and every timed step
+(``wall_s``: {"1": [...], "2": [...]}, round k at index k).
 """
 import json
 import multiprocessing
@@ -34,6 +52,7 @@ import os
 import platform
 import resource
 import statistics
+import threading
 import time
 
 import numpy as np
@@ -154,6 +173,41 @@ def measure(method, n, steps=5, warmup=2, threads=1):
     return row
 
 
+PAIRS = 30             # the fewest timed pairs (rounds) of a paired measurement (`pairs_for`)
+
+
+def pairs_for(steps):
+    """Timed pairs of a paired measurement: ``steps``, at least `PAIRS`, rounded up to even (ABBA).
+    The median of 30 per-pair ratios has a standard error of about a sixth of their interquartile
+    range (1.25 sigma / sqrt(30) for a normal spread; quartiles 0.95-1.10 for the peer at 256^2 on
+    a shared host: about 0.02), and 30 pairs at 256^2 cost about a second (DGMPM CTU) to ten
+    (ADER)."""
+    pairs = max(steps, PAIRS)
+    return pairs + pairs % 2
+
+
+def alternate(steps, rounds, warmup, before=None):
+    """Time ``steps`` (callables, one step of each side) in turn, each once a round: in their order
+    in even rounds, reversed in odd ones (ABBA for two sides), ``warmup`` rounds, then ``rounds``
+    timed ones. ``before(i)``, if given, runs untimed before each call of ``steps[i]``. Returns
+    the CPU and wall time of every timed call, two arrays (len(steps), rounds): side i, round k."""
+    cpu, wall = np.zeros((2, len(steps), rounds))
+    order = list(range(len(steps)))
+    for k in range(warmup + rounds):
+        # ABBA: each of two sides first in half of the rounds, so an order effect (caches, the
+        # other side's leftovers; the second step of a peer pair ran 3-6 % slower at 256^2) falls
+        # on both alike
+        for i in order if k % 2 == 0 else order[::-1]:
+            if before is not None:
+                before(i)
+            t0, c0 = time.perf_counter(), time.process_time()
+            steps[i]()
+            if k >= warmup:
+                wall[i, k - warmup] = time.perf_counter() - t0
+                cpu[i, k - warmup] = time.process_time() - c0
+    return cpu, wall
+
+
 def measure_pair(method, n, steps=5, warmup=2):
     """The peer ``method`` and its counterpart stepping in turn in one fresh process
     (`peer.measure_pair_here`): a paired row (dict)."""
@@ -161,6 +215,74 @@ def measure_pair(method, n, steps=5, warmup=2):
     if "error" in row:
         pair = [peer.COUNTERPART[method], method]
         return {"method": "/".join(pair), "pair": pair, "cells": n * n, "threads": 1, "error": row["error"]}
+    return row
+
+
+def _use_threads(n):
+    """Switch the passes to ``n`` threads with their workers running: `parallel.set_threads` drops
+    the pool of another count, whose new workers would otherwise start inside the next timed step
+    (each blocks on the barrier, so the pool starts all n - 1 of them)."""
+    from . import parallel
+
+    parallel.set_threads(n)
+    barrier = threading.Barrier(n, timeout=60)
+    parallel.rows(n * parallel.MIN_ROWS, lambda lo, hi: barrier.wait())
+
+
+def alternate_threads(disc, threads, pairs, warmup):
+    """Step the one simulation of ``disc`` (a `build.build` result) on each of the thread counts
+    ``threads`` in turn (`alternate`: one step per count a round; any count gives the same bits).
+    Returns the CPU and wall times (len(threads), pairs) and the final state; the thread setting
+    is restored."""
+    from . import parallel
+
+    stepper, state = disc.stepper, disc.initial
+
+    def step():
+        nonlocal state
+        state = stepper.step(state)
+
+    previous = parallel.set_threads(1)
+    try:
+        cpu, wall = alternate([step] * len(threads), pairs, warmup, before=lambda i: _use_threads(threads[i]))
+    finally:
+        parallel.set_threads(previous)
+    return cpu, wall, state
+
+
+def measure_threads_here(method, n, threads, steps, warmup):
+    """The paired scaling of ``method`` on n x n cells in this process (the bench spawns it): one
+    simulation stepping on each count of ``threads`` (1 among them) in turn (`alternate_threads`),
+    ``warmup`` rounds, then ``pairs_for(steps)`` timed ones. Returns a paired scaling row (dict):
+    per count t > 1, the quartiles of the per-round speed-ups (step on 1 thread / step on t) and
+    the ratio of the medians, on each clock."""
+    from .build import build
+
+    disc = build(scene_for(method, n))
+    pairs = pairs_for(steps)
+    cpu, wall, _ = alternate_threads(disc, threads, pairs, warmup)
+    one = threads.index(1)
+    row = {"method": method, "cells": int(disc.stepper.grid.submesh.nelements), "threads": list(threads),
+           "pairs": pairs, "warmup": warmup, "order": "ABBA"}
+    for clock, times in (("wall", wall), ("cpu", cpu)):
+        speedup = {}
+        for i, t in enumerate(threads):
+            if i != one:
+                q25, median, q75 = np.percentile(times[one] / times[i], [25, 50, 75])
+                speedup[str(t)] = {"q25": float(q25), "median": float(median), "q75": float(q75),
+                                   "medians_ratio": float(np.median(times[one]) / np.median(times[i]))}
+        row.update({f"{clock}_speedup": speedup,
+                    f"{clock}_step_s": {str(t): float(np.median(times[i])) for i, t in enumerate(threads)},
+                    f"{clock}_s": {str(t): times[i].tolist() for i, t in enumerate(threads)}})
+    return row
+
+
+def measure_threads(method, n, threads, steps=5, warmup=2):
+    """The paired scaling of ``method`` over ``threads`` in one fresh process
+    (`measure_threads_here`): a paired scaling row (dict)."""
+    row = _spawned(measure_threads_here, method, n, list(threads), steps, warmup)
+    if "error" in row:
+        return {"method": method, "cells": n * n, "threads": list(threads), "error": row["error"]}
     return row
 
 
@@ -241,13 +363,15 @@ def format_stages(rows):
     return "\n".join(lines)
 
 
-def format_scaling(rows):
+def format_scaling(rows, threads_paired=()):
     """Per (method, cells) measured on several thread counts: wall time per step and the speed-up
-    over one thread."""
+    over one thread; after it, the paired scaling of the same (method, cells) if any
+    (`format_threads_pair`)."""
     groups = {}
     for r in rows:
         if "error" not in r:
             groups.setdefault((r["method"], r["cells"]), {})[r["threads"]] = r["step_s"]
+    pairs = {(p["method"], p["cells"]): p for p in threads_paired}
     lines = []
     for (method, cells), times in groups.items():
         if len(times) < 2 or 1 not in times:
@@ -255,21 +379,40 @@ def format_scaling(rows):
         parts = ", ".join(f"{n} thread{'s' if n > 1 else ''} {1e3 * t:.2f} ms (x{times[1] / t:.2f})"
                           for n, t in sorted(times.items()))
         lines.append(f"{method} {cells} cells: {parts}")
-    return "\n".join(lines)
+        if (method, cells) in pairs:
+            lines.append(format_threads_pair(pairs.pop((method, cells))))
+    return "\n".join([*lines, *map(format_threads_pair, pairs.values())])     # rows failed: still said
+
+
+def format_threads_pair(p):
+    """One line of a paired scaling row: per count t > 1, the median per-round wall-time speed-up
+    over one thread, its quartiles, the ratio of the medians."""
+    head = f"{p['method']} {p['cells']} cells, paired, alternating thread counts in one process"
+    if "error" in p:
+        return f"{head}: failed: {p['error']}"
+    one = p["wall_step_s"]["1"]
+    parts = ", ".join(f"{t} threads x{s['median']:.2f} (quartiles {s['q25']:.2f}-{s['q75']:.2f}; ratio of the "
+                      f"medians {s['medians_ratio']:.2f}: {1e3 * one:.2f} / {1e3 * p['wall_step_s'][t]:.2f} ms "
+                      "per step)" for t, s in p["wall_speedup"].items())
+    return f"{head}: {parts}; medians of {p['pairs']} per-round speed-ups, {p['order']} order"
 
 
 def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threads=(1,)):
     """Run every (method, size, thread count), then at each size every requested peer method whose
-    counterpart is requested too, paired (`measure_pair`; not without the peer); write JSON if asked.
-    Returns the rows, the paired rows and, with several thread counts, the memory bandwidth on each
-    (`memory_bandwidth`, else {}). The CPU time per cell of a one-thread row is the cost per core."""
+    counterpart is requested too, paired (`measure_pair`; not without the peer), and, with several
+    thread counts (1 among them), every method but the peer's on them all in one process
+    (`measure_threads`); write JSON if asked. Returns the rows, the paired rows, the paired scaling
+    rows and, with several thread counts, the memory bandwidth on each (`memory_bandwidth`, else
+    {}). The CPU time per cell of a one-thread row is the cost per core."""
     from .run import progress_bar
 
     pairs = [m for m in methods if m in peer.METHODS and peer.COUNTERPART[m] in methods]
     if pairs and not peer.available():
         pairs = []                      # the peer rows say MISSING; no paired row
-    rows, paired = [], []
-    bar = progress_bar(progress, len(sizes) * (len(methods) * len(threads) + len(pairs)), unit="run")
+    # every method: 2 x pairs steps each, ~10 s for the slowest (ADER) at 256^2; the peer is serial
+    scaled = [m for m in methods if m not in peer.METHODS] if len(threads) > 1 and 1 in threads else []
+    rows, paired, threads_paired = [], [], []
+    bar = progress_bar(progress, len(sizes) * (len(methods) * len(threads) + len(pairs) + len(scaled)), unit="run")
     for n in sizes:                     # methods interleaved at each size (a peer beside ours)
         for method in methods:
             for t in threads:
@@ -283,11 +426,15 @@ def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threa
             bar.set_description(f"{peer.COUNTERPART[method]}/{method} {n}x{n} paired")
             paired.append(measure_pair(method, n, steps, warmup))
             bar.update()
+        for method in scaled:
+            bar.set_description(f"{method} {n}x{n} threads {','.join(map(str, threads))} paired")
+            threads_paired.append(measure_threads(method, n, threads, steps, warmup))
+            bar.update()
     bar.close()
     memory = memory_bandwidth(threads) if len(threads) > 1 else {}
     if json_path is not None:
         info = {**machine(), "memory_GBps": {str(t): g for t, g in memory.items()}, "memory_MiB": MEMORY_MIB}
         with open(json_path, "w") as fh:
-            json.dump({"machine": info, "steps": steps, "warmup": warmup, "rows": rows, "paired": paired}, fh,
-                      indent=1)
-    return rows, paired, memory
+            json.dump({"machine": info, "steps": steps, "warmup": warmup, "rows": rows, "paired": paired,
+                       "threads_paired": threads_paired}, fh, indent=1)
+    return rows, paired, threads_paired, memory

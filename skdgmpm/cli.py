@@ -152,13 +152,13 @@ def _cmd_bench(args):
     sizes = study._int_list(args.sizes, "--sizes")
     cores = parallel.available()
     threads = study._int_list(args.threads, "--threads") if args.threads else sorted({1, cores})
-    rows, paired, memory = bench.main(methods, sizes, steps=args.steps, warmup=args.warmup, json_path=args.json,
-                                      progress=not args.quiet, threads=threads)
+    rows, paired, threads_paired, memory = bench.main(methods, sizes, steps=args.steps, warmup=args.warmup,
+                                                      json_path=args.json, progress=not args.quiet, threads=threads)
     m = bench.machine()
     print(f"{m['processor']}, {m['cpus']} CPUs, Python {m['python']}")
     print(bench.format_table(rows))
     print("\nstages (own wall time per step):\n" + bench.format_stages(rows))
-    scaling = bench.format_scaling(rows)
+    scaling = bench.format_scaling(rows, threads_paired)
     if scaling:
         print("\nthreads (wall time per step, speed-up over one thread):\n" + scaling)
         print(bench.format_memory(memory))

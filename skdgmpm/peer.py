@@ -56,7 +56,6 @@ EQUATIONS = 5          # sigma_11, sigma_22, sigma_12, u, v
 OUR_EQUATIONS = 6      # DGMPM's 2D finite-strain system: velocity (2) and deformation gradient (4)
 CFL = 0.9
 NUM_GHOST = 2
-PAIRS = 30             # the fewest timed pairs of a paired measurement (`pairs_for`)
 
 
 def available():
@@ -258,24 +257,16 @@ def measure_here(method, n, steps, warmup):
             "max_speed": float(np.sqrt(q[3] ** 2 + q[4] ** 2).max())}
 
 
-def pairs_for(steps):
-    """Timed pairs of a paired measurement: ``steps``, at least `PAIRS`, rounded up to even (ABBA).
-    The median of 30 per-pair ratios has a standard error of about a sixth of their interquartile
-    range (1.25 sigma / sqrt(30) for a normal spread; quartiles 0.95-1.10 at 256^2 on a shared host:
-    about 0.02), and 30 pairs at 256^2 cost about a second."""
-    pairs = max(steps, PAIRS)
-    return pairs + pairs % 2
-
-
 def measure_pair_here(method, n, steps, warmup):
     """The peer ``method`` and its counterpart (`COUNTERPART`, on one thread) built on the same n x n
-    plate in this process (the bench spawns it), stepping in turn: ``warmup`` pairs, then
-    ``pairs_for(steps)`` timed pairs in ABBA order, each step's CPU and wall time recorded. Returns a
-    paired row (dict): the quartiles of the per-pair ratios ours / peer and the ratio of the medians."""
+    plate in this process (the bench spawns it), stepping in turn (`bench.alternate`): ``warmup``
+    pairs, then ``bench.pairs_for(steps)`` timed pairs in ABBA order, each step's CPU and wall time
+    recorded. Returns a paired row (dict): the quartiles of the per-pair ratios ours / peer and the
+    ratio of the medians."""
     import numpy as np
 
     from . import parallel
-    from .bench import scene_for
+    from .bench import alternate, pairs_for, scene_for
     from .build import build as build_ours
 
     parallel.set_threads(1)             # the peer is serial: cost per core against cost per core
@@ -289,18 +280,8 @@ def measure_pair_here(method, n, steps, warmup):
         nonlocal state
         state = stepper.step(state)
 
-    steppers = (step_ours, lambda: solver.evolve_to_time(solution))
     pairs = pairs_for(steps)
-    cpu, wall = np.zeros((2, pairs)), np.zeros((2, pairs))      # [ours, peer] x pair
-    for k in range(warmup + pairs):
-        # ABBA: each side first in half of the pairs, so an order effect (caches, the other side's
-        # leftovers; the second step of a pair ran 3-6 % slower at 256^2) falls on both alike
-        for side in ((0, 1), (1, 0))[k % 2]:
-            t0, c0 = time.perf_counter(), time.process_time()
-            steppers[side]()
-            if k >= warmup:
-                wall[side, k - warmup] = time.perf_counter() - t0
-                cpu[side, k - warmup] = time.process_time() - c0
+    cpu, wall = alternate((step_ours, lambda: solver.evolve_to_time(solution)), pairs, warmup)   # [ours, peer]
     row = {"method": f"{ours}/{method}", "pair": [ours, method], "peer": f"clawpack {version()}",
            "cells": n * n, "threads": 1, "pairs": pairs, "warmup": warmup, "order": "ABBA"}
     for clock, times in (("cpu", cpu), ("wall", wall)):

@@ -34,6 +34,62 @@ def test_bench_measures_each_thread_count(tmp_path, capsys):
     # the machine's memory bandwidth on each thread count, beside the scaling it bounds
     assert set(data["machine"]["memory_GBps"]) == {"1", "2"} and min(data["machine"]["memory_GBps"].values()) > 0
     assert "memory (x + a y" in text and "GB/s" in text
+    # and the same method on both counts in one process, its line after the rows' speed-up
+    (scaling,) = data["threads_paired"]
+    assert "error" not in scaling and scaling["threads"] == [1, 2] and scaling["pairs"] == bench.PAIRS
+    rows_line = text.index("dgmpm-dcu 64 cells: 1 thread ")
+    assert text.index("dgmpm-dcu 64 cells, paired, alternating thread counts in one process: 2 threads x") > rows_line
+
+
+def test_paired_thread_scaling_steps_one_simulation(monkeypatch):
+    """The paired scaling switches the thread count between the steps of one simulation: its fields
+    are sane, and its final state has the bits of the same steps all on one thread. The chunk
+    length is lowered so that 8 x 8 is split into chunks, as 256^2 is."""
+    from skdgmpm import parallel
+    from skdgmpm.build import build
+
+    monkeypatch.setattr(parallel, "MIN_ROWS", 16)
+    previous = parallel.set_threads(3)
+    try:
+        row = bench.measure_threads_here("dgmpm-ctu", 8, [1, 2], steps=3, warmup=1)
+        assert parallel.threads() == 3                          # the setting is restored
+        assert row["cells"] == 64 and row["threads"] == [1, 2] and row["order"] == "ABBA"
+        assert row["pairs"] == bench.pairs_for(3) == bench.PAIRS
+        for clock in ("wall", "cpu"):
+            assert set(row[f"{clock}_s"]) == {"1", "2"} and set(row[f"{clock}_speedup"]) == {"2"}
+            assert all(len(ts) == row["pairs"] and min(ts) > 0 for ts in row[f"{clock}_s"].values())
+            s = row[f"{clock}_speedup"]["2"]
+            assert 0 < s["q25"] <= s["median"] <= s["q75"] < np.inf and 0 < s["medians_ratio"] < np.inf
+            assert all(0 < t < np.inf for t in row[f"{clock}_step_s"].values())
+        disc = build(bench.scene_for("dgmpm-ctu", 8))
+        _, wall, alternated = bench.alternate_threads(disc, [1, 2], 4, warmup=1)
+        assert wall.shape == (2, 4)
+        parallel.set_threads(1)
+        ordinary = build(bench.scene_for("dgmpm-ctu", 8))
+        state = ordinary.initial
+        for _ in range(2 * (4 + 1)):
+            state = ordinary.stepper.step(state)
+    finally:
+        parallel.set_threads(previous)
+    assert alternated.step == state.step == 10 and alternated.t == state.t
+    assert np.all(np.isfinite(state.U)) and np.array_equal(alternated.U, state.U)
+
+
+def test_paired_scaling_line():
+    """Pure formatting, fabricated numbers: the rows' speed-up, then the paired one of the same size."""
+    rows = [{"method": "ader-dgmpm-1", "cells": 65536, "threads": 1, "step_s": 0.16},
+            {"method": "ader-dgmpm-1", "cells": 65536, "threads": 2, "step_s": 0.1}]
+    pair = {"method": "ader-dgmpm-1", "cells": 65536, "threads": [1, 2], "pairs": 30, "order": "ABBA",
+            "wall_speedup": {"2": {"q25": 1.55, "median": 1.624, "q75": 1.7, "medians_ratio": 1.61}},
+            "wall_step_s": {"1": 0.1523, "2": 0.0946}}
+    rows_line, pair_line = bench.format_scaling(rows, [pair]).splitlines()
+    assert rows_line == "ader-dgmpm-1 65536 cells: 1 thread 160.00 ms (x1.00), 2 threads 100.00 ms (x1.60)"
+    assert pair_line == ("ader-dgmpm-1 65536 cells, paired, alternating thread counts in one process: 2 threads "
+                         "x1.62 (quartiles 1.55-1.70; ratio of the medians 1.61: 152.30 / 94.60 ms per step); "
+                         "medians of 30 per-round speed-ups, ABBA order")
+    assert bench.format_scaling(rows[:1], [pair]) == pair_line        # the rows failed: still said
+    failed = {"method": "ader-dgmpm-1", "cells": 64, "threads": [1, 2], "error": "boom"}
+    assert bench.format_scaling([], [failed]).endswith("alternating thread counts in one process: failed: boom")
 
 
 def test_memory_bandwidth_probe_writes_the_triad():

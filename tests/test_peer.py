@@ -83,14 +83,14 @@ def test_paired_measurement_alternates_steps_in_one_process():
     pair = bench.measure_pair("pyclaw-ctu", 8, steps=3, warmup=1)
     assert "error" not in pair, pair.get("error")
     assert pair["method"] == "dgmpm-ctu/pyclaw-ctu" and pair["cells"] == 64 and pair["threads"] == 1
-    assert pair["pairs"] == peer.pairs_for(3) == peer.PAIRS and pair["order"] == "ABBA"
+    assert pair["pairs"] == bench.pairs_for(3) == bench.PAIRS and pair["order"] == "ABBA"
     for clock in ("cpu", "wall"):
         assert all(len(pair[f"{clock}_s"][side]) == pair["pairs"] for side in ("ours", "peer"))
         assert all(t > 0 for side in ("ours", "peer") for t in pair[f"{clock}_s"][side])
         q25, median, q75 = (pair[f"{clock}_ratio_{q}"] for q in ("q25", "median", "q75"))
         assert 0 < q25 <= median <= q75 and math.isfinite(q75)
         assert 0 < pair[f"{clock}_medians_ratio"] < math.inf
-    assert peer.pairs_for(31) == 32 and peer.pairs_for(40) == 40      # even: ABBA balanced
+    assert bench.pairs_for(31) == 32 and bench.pairs_for(40) == 40    # even: ABBA balanced
 
 
 def test_ratio_line_of_a_paired_row():
