@@ -208,6 +208,14 @@ def alternate(steps, rounds, warmup, before=None):
     return cpu, wall
 
 
+def ratios(num, den):
+    """The quartiles of the per-round ratios num / den of two sides' step times (arrays, one entry
+    a round) and the ratio of their medians: {"q25", "median", "q75", "medians_ratio"}."""
+    q25, median, q75 = np.percentile(num / den, [25, 50, 75])
+    return {"q25": float(q25), "median": float(median), "q75": float(q75),
+            "medians_ratio": float(np.median(num) / np.median(den))}
+
+
 def measure_pair(method, n, steps=5, warmup=2):
     """The peer ``method`` and its counterpart stepping in turn in one fresh process
     (`peer.measure_pair_here`): a paired row (dict)."""
@@ -265,12 +273,7 @@ def measure_threads_here(method, n, threads, steps, warmup):
     row = {"method": method, "cells": int(disc.stepper.grid.submesh.nelements), "threads": list(threads),
            "pairs": pairs, "warmup": warmup, "order": "ABBA"}
     for clock, times in (("wall", wall), ("cpu", cpu)):
-        speedup = {}
-        for i, t in enumerate(threads):
-            if i != one:
-                q25, median, q75 = np.percentile(times[one] / times[i], [25, 50, 75])
-                speedup[str(t)] = {"q25": float(q25), "median": float(median), "q75": float(q75),
-                                   "medians_ratio": float(np.median(times[one]) / np.median(times[i]))}
+        speedup = {str(t): ratios(times[one], times[i]) for i, t in enumerate(threads) if i != one}
         row.update({f"{clock}_speedup": speedup,
                     f"{clock}_step_s": {str(t): float(np.median(times[i])) for i, t in enumerate(threads)},
                     f"{clock}_s": {str(t): times[i].tolist() for i, t in enumerate(threads)}})

@@ -266,7 +266,7 @@ def measure_pair_here(method, n, steps, warmup):
     import numpy as np
 
     from . import parallel
-    from .bench import alternate, pairs_for, scene_for
+    from .bench import alternate, pairs_for, ratios, scene_for
     from .build import build as build_ours
 
     parallel.set_threads(1)             # the peer is serial: cost per core against cost per core
@@ -285,10 +285,10 @@ def measure_pair_here(method, n, steps, warmup):
     row = {"method": f"{ours}/{method}", "pair": [ours, method], "peer": f"clawpack {version()}",
            "cells": n * n, "threads": 1, "pairs": pairs, "warmup": warmup, "order": "ABBA"}
     for clock, times in (("cpu", cpu), ("wall", wall)):
-        q25, median, q75 = np.percentile(times[0] / times[1], [25, 50, 75])
+        r = ratios(times[0], times[1])
         ours_s, peer_s = np.median(times, axis=1)
-        row.update({f"{clock}_ratio_median": float(median), f"{clock}_ratio_q25": float(q25),
-                    f"{clock}_ratio_q75": float(q75), f"{clock}_medians_ratio": float(ours_s / peer_s),
+        row.update({f"{clock}_ratio_median": r["median"], f"{clock}_ratio_q25": r["q25"],
+                    f"{clock}_ratio_q75": r["q75"], f"{clock}_medians_ratio": r["medians_ratio"],
                     f"{clock}_step_s": {"ours": float(ours_s), "peer": float(peer_s)},
                     f"{clock}_s": {"ours": times[0].tolist(), "peer": times[1].tolist()}})
     return row
