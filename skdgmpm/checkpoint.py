@@ -5,7 +5,7 @@
 - the state: every field of `ParticleState` (t, step, U, Q, x, the wave speeds that set the next
   time step, the grid dofs of DGFEM, the health record, the laws' internal variables ``history``);
 - the steppers' own run state, which a step reads or accumulates (`RUN_STATE`): the boundary work
-  ``external_work``, ``dt_trend`` and ``dt_recent`` (every stepper), ``picard`` (ADER: predictor iteration counts) and
+  ``external_work``, ``dt_growth`` and ``dt_recent`` (every stepper), ``picard`` (ADER: predictor iteration counts) and
   ``limited_cells`` (DGFEM: the limiter's count). Everything else a stepper sets while stepping
   is a cache rebuilt from the state at the start of each step (DGMPM ``_kept``, DGFEM and ADER
   ``history_n``, ADER ``_repeated``, MPM ``_last_shape``: arrays the next step overwrites; DGMPM
@@ -33,8 +33,8 @@ from .errors import InputError
 from .outdir import atomic_write
 
 NAME = "checkpoint.npz"
-FORMAT = 1
-RUN_STATE = ("external_work", "dt_trend", "dt_recent", "limited_cells", "picard")
+FORMAT = 2                      # 1: the CFL guard kept the last speed-up only (dt_trend = 1 / speed-up)
+RUN_STATE = ("external_work", "dt_growth", "dt_recent", "limited_cells", "picard")
 DEFAULT_EVERY = "10 min"
 _UNITS = {"s": 1.0, "min": 60.0, "h": 3600.0}
 
@@ -160,6 +160,10 @@ def read(folder):
         meta = json.loads(str(arrays.pop("meta")))
     except (OSError, ValueError, KeyError) as exc:
         raise InputError(f"--resume {folder}: {NAME} is unreadable ({exc})") from None
+    if meta.get("format") == 1 and "dt_trend" in meta["stepper"]:      # the guard's window starts afresh
+        trend = meta["stepper"].pop("dt_trend")
+        meta["stepper"]["dt_growth"] = [1.0 / trend if trend > 0 else 1.0]
+        meta["format"] = FORMAT
     if meta.get("format") != FORMAT:
         raise InputError(f"--resume {folder}: {NAME} has format {meta.get('format')!r}, this version reads {FORMAT}")
     state = ParticleState(meta["t"], arrays["U"], arrays["Q"], arrays["x"], meta["step"], arrays.get("speed"),

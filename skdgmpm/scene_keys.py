@@ -182,8 +182,8 @@ KEYS = (
         "run a CFL above the method's known stability limit (DGMPM: the von Neumann limit of the layout, "
         "MPM: 1) with a warning instead of refusing it; no effect where no limit is known"),
     Key("method.cfl_guard", "", '"predict"', '"largest"',
-        "Godunov schemes: predict (the first attempt of a step scaled by the last step's wave speed-up and "
-        "no longer than the CFL steps of the last 8 states: rarely repeated) or largest (always the largest admissible step: CFL 1 exactness in 1D)",
+        "Godunov schemes: predict (the first attempt of a step divided by the wave speed-up foreseen from "
+        "those of the last 16 steps and no longer than their CFL steps: rarely repeated) or largest (always the largest admissible step: CFL 1 exactness in 1D)",
         methods=("dgmpm", "rk-dgfem", "ader-dgfem", "ader-dgmpm")),
     Key("method.geometry", "", '"updated"', '"linearised"',
         "MPM: updated (particles move over the grid) or linearised (they stay at their reference "

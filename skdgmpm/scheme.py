@@ -102,7 +102,18 @@ def _timed(method, name):
     return timed
 
 
-DT_WINDOW = 8                   # states whose CFL steps bound a predicted step (`step_with_cfl_guard`)
+DT_WINDOW = 16                  # steps whose speed-ups and CFL steps set a predicted step (`step_with_cfl_guard`)
+
+
+def predicted_growth(growths):
+    """The speed-up of the fastest wave to expect over the next step, from those of the last
+    steps (c_(k+1) / c_k, oldest first): the last one plus the largest rise of the speed-up from
+    one step to the next among them, within [1, 2]. A wave that speeds up smoothly is foreseen;
+    one whose speed-up grows, within the largest surprise seen lately."""
+    if not growths:
+        return 1.0
+    rise = max((b - a for a, b in zip(growths, growths[1:])), default=0.0)
+    return min(2.0, max(1.0, growths[-1] + max(0.0, rise)))
 
 
 class GodunovScheme:
@@ -112,7 +123,7 @@ class GodunovScheme:
 
     face_options = {}
     external_work = 0.0
-    dt_trend = 1.0               # the wave speed's change over the last step (`step_with_cfl_guard`)
+    dt_growth = ()               # the fastest wave's speed-ups of the last DT_WINDOW steps (`step_with_cfl_guard`)
     dt_recent = ()               # the CFL steps of the last DT_WINDOW states (`step_with_cfl_guard`)
     cfl_guard = "predict"        # or "largest" (method.cfl_guard)
     body_force = None            # b(X, t) -> (n, d) in m/s^2 (a manufactured solution's); None: no source
@@ -254,16 +265,14 @@ class GodunovScheme:
         """Run ``attempt(dt) -> (new state, boundary work)``; repeat with a smaller Delta t if the
         waves of the new state are faster than the CFL condition allowed (e.g. the first step of
         an impact on a stiffening law). With ``cfl_guard = "predict"`` the first attempt takes the
-        state's CFL step scaled by how much the waves sped up over the last step (``dt_trend`` =
-        c_n / c_(n+1), in [1/2, 1]; 1 while they do not speed up), and no more than the CFL step
-        of any of the last DT_WINDOW states (``dt_recent``): the fastest wave of an impact jitters
-        by about 1 % from step to step, and a step as long as the current state allows was
-        repeated at every jitter up (28 % of the steps of the bench's plate; 11 % with the
-        window, for steps 1 % shorter on average). A repeat costs a whole step; ``"largest"``
-        always starts from the state's CFL step."""
+        state's CFL step divided by the speed-up `predicted_growth` expects from those of the
+        last DT_WINDOW steps (``dt_growth``; 1 while the waves do not speed up), and no more than
+        the CFL step of any of the last DT_WINDOW states (``dt_recent``): the fastest wave of an
+        impact jitters by about 1 % from step to step, and a repeat costs a whole step
+        (docs/results.md: the CFL guard). ``"largest"`` always starts from the state's CFL step."""
         dt_cfl = self.time_step(state)
         if self.cfl_guard == "predict":
-            dt = min(dt_cfl * self.dt_trend, *self.dt_recent, dt_max)
+            dt = min(dt_cfl / predicted_growth(self.dt_growth), *self.dt_recent, dt_max)
         else:
             dt = min(dt_cfl, dt_max)
         for _ in range(4):
@@ -273,7 +282,8 @@ class GodunovScheme:
             if dt <= dt_new * (1 + 1e-9):
                 break
             dt = dt_new
-        self.dt_trend = min(1.0, max(0.5, dt_new / dt_cfl))
+        growth = dt_cfl / dt_new if 0 < dt_new < np.inf and dt_cfl < np.inf else 1.0
+        self.dt_growth = (*self.dt_growth, growth)[-DT_WINDOW:]
         self.dt_recent = (*self.dt_recent, dt_new)[-DT_WINDOW:]
         self.external_work += work
         return new

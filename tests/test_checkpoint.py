@@ -201,3 +201,27 @@ def test_resume_errors_are_one_line(capsys, tmp_path):
         assert err.count("\n") == 1 and err.startswith("error: ") and "Traceback" not in err, err
         for w in words:
             assert w in err, (w, err)
+
+
+def test_a_checkpoint_of_the_former_format_resumes(tmp_path):
+    """Format 1 kept the CFL guard's last speed-up as dt_trend = 1 / speed-up; format 2 keeps the
+    speed-ups of a window (dt_growth). A format-1 checkpoint resumes with its one speed-up."""
+    scene, overrides = CASES["dgmpm-impact-2d"]
+    overrides = overrides + ["run.checkpoint_every=5"]
+
+    def crash(state, disc):
+        if state.step == 7:
+            raise RuntimeError("power cut")
+
+    with pytest.raises(RuntimeError):
+        run(scene, overrides, out=tmp_path / "cut", progress=False, on_step=crash)
+    path = tmp_path / "cut" / checkpoint.NAME
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    meta = json.loads(str(arrays["meta"]))
+    growth = meta["stepper"].pop("dt_growth")
+    meta["stepper"]["dt_trend"], meta["format"] = 1.0 / growth[-1], 1
+    arrays["meta"] = np.array(json.dumps(meta))
+    np.savez(path, **arrays)
+    assert checkpoint.read(tmp_path / "cut").stepper["dt_growth"] == [pytest.approx(growth[-1], rel=1e-15)]
+    assert resume(tmp_path / "cut", progress=False).status == "ok"

@@ -101,7 +101,7 @@ def test_records_of_the_constitutive_update_are_those_of_the_record_pass(case):
     for a, b in zip(kept, (face, split, rec_state)):
         np.testing.assert_array_equal(a, b)
     fresh = build(load_scene(name, overrides)).stepper     # the same guard state: the same Delta t
-    fresh.dt_trend, fresh.dt_recent = st.dt_trend, st.dt_recent
+    fresh.dt_growth, fresh.dt_recent = st.dt_growth, st.dt_recent
     again = st.step(disc.initial)           # stepped from the initial state: its own records
     other = fresh.step(disc.initial)
     assert again.t == other.t and np.array_equal(again.Q, other.Q)
