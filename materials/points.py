@@ -64,8 +64,10 @@ def _parameters(params, m):
 
 
 # ---------------------------------------------------------------- the dispatch, made from LAWS
-# What a point function computes (``kind``) and the arguments after (F, prm) it takes; the
-# arguments after (F, prm) of each point function of a `base.PointLaw`.
+# `_ARGUMENTS`: the arguments after (F, prm) of each kind of computation (``kind``) a kernel
+# asks for; `_TAKES`: those of each point function of a `base.PointLaw`, the same but for a
+# law's joint stress and tangent, which takes no history (a law with history has none: it
+# updates, then computes its tangent).
 TANGENT, STRESS, UPDATE, STRESS_TANGENT = range(4)
 _ARGUMENTS = {TANGENT: ("C", "d"), STRESS: ("P", "d"), UPDATE: ("h_n", "h", "P", "d"),
               STRESS_TANGENT: ("h_n", "h", "P", "C", "d")}

@@ -17,7 +17,20 @@ the package), and the numba version; the digest is also each kernel's source sta
 thus compiles afresh, and every environment with the same sources and numba version shares one
 cache, wherever it is installed. <base>: $NUMBA_CACHE_DIR if set, else $XDG_CACHE_HOME/skdgmpm or
 ~/.cache/skdgmpm; where it cannot be written, numba's own locators take over. Nothing global is
-set: numba's configuration is read, never written.
+set: numba's configuration is read, and written only for the time this package's own kernels
+compile (`Vectorise`).
+
+Straight-line SIMD
+------------------
+A kernel's work per point or face is straight-line code over a few components (a state's 6, a
+tangent's 16) with control flow between points, which LLVM's loop vectoriser cannot take over
+several points. Its SLP vectoriser packs the isomorphic operations of one point into SIMD
+registers; numba leaves it off by default since 0.57 (miscompilations in the LLVM of the time;
+clang runs it at -O2). `Vectorise` turns it on while this package's kernels compile (and what
+they compile on their behalf), never for other code: it keeps every operation an IEEE operation
+lane by lane (no reassociation, no contraction), so the answers are the same bits (the stored
+answers of tests/test_regression.py and the state hashes check that); the face, cells' and law's
+passes of a 2D DGMPM step take 5-12 % less time (docs/bench/session19.md).
 
 One kernel per dimension
 ------------------------
@@ -161,9 +174,39 @@ class Locator(_CacheLocator):
 
 
 def install():
-    """Make numba consult `Locator` first (idempotent); it claims this package's files only."""
+    """Make numba consult `Locator` first (idempotent); it claims this package's files only. And
+    compile this package's kernels with the SLP vectoriser (`Vectorise`)."""
     if Locator not in CacheImpl._locator_classes:
         CacheImpl._locator_classes = [Locator] + list(CacheImpl._locator_classes)
+    if not Vectorise.installed:
+        event.register("numba:compile", Vectorise())
+        Vectorise.installed = True
+
+
+def ours(ev):
+    """Whether a numba:compile event compiles a function of this package."""
+    module = getattr(getattr(ev.data.get("dispatcher"), "py_func", None), "__module__", "") or ""
+    return module == PACKAGE or module.startswith(PACKAGE + ".")
+
+
+class Vectorise(event.Listener):
+    """numba's SLP_VECTORIZE on while a function of this package compiles, with the functions its
+    compilation compiles; as it was before for every other compilation (see the module's
+    docstring). numba compiles under its global lock, so the setting is not seen by another
+    thread's compilation."""
+
+    installed = False
+
+    def __init__(self):
+        self.saved = []
+
+    def on_start(self, ev):
+        self.saved.append(config.SLP_VECTORIZE)
+        if ours(ev):
+            config.SLP_VECTORIZE = 1
+
+    def on_end(self, ev):
+        config.SLP_VECTORIZE = self.saved.pop()
 
 
 # ---------------------------------------------------------------- one kernel per literal size
@@ -267,8 +310,7 @@ class compile_notice(event.Listener):
         if self.depth > 1:
             return
         self._start = time.process_time()
-        module = getattr(getattr(ev.data.get("dispatcher"), "py_func", None), "__module__", "") or ""
-        if not self.shown and (module == PACKAGE or module.startswith(PACKAGE + ".")):
+        if not self.shown and ours(ev):
             self.shown = True
             expected = _measured().get(self.what, self.expected)
             about = f"about {expected} s; " if expected else ""

@@ -1,7 +1,8 @@
 """The compiled kernels' disk cache (`skdgmpm.kernel_cache`): keyed on every source file of the
 package that compiles code, so that an edit of a file whose functions a kernel inlines
 (materials/*.py, riemann.py) compiles afresh while an edit of a Python-only file (cli.py) does not, and the same for every environment that installs the same sources; importing
-the package changes no global setting; the first run says when it compiles."""
+the package changes no global setting (numba's SLP vectoriser is on while the package's own kernels
+compile, for them only); the first run says when it compiles."""
 import json
 import os
 import shutil
@@ -10,6 +11,7 @@ import sys
 from pathlib import Path
 
 import numba
+import numpy as np
 
 import skdgmpm
 from skdgmpm import kernel_cache
@@ -47,6 +49,46 @@ def test_import_sets_nothing_global_and_keeps_the_repository_off_the_package_pat
     assert same and path == [str(Path(skdgmpm.__file__).parent)]
     assert len(materials) == 1 and Path(materials[0]).name == "materials"
     assert modules == ["skdgmpm", "skdgmpm.kernel_cache"]     # no kernel module imported, nothing compiled
+
+
+
+def _axpy4():
+    def axpy4(a, x, y, out):            # one point's four components: straight-line code
+        for p in range(x.shape[0]):
+            x0, x1, x2, x3 = x[p, 0], x[p, 1], x[p, 2], x[p, 3]
+            y0, y1, y2, y3 = y[p, 0], y[p, 1], y[p, 2], y[p, 3]
+            out[p, 0] = a * x0 + y0
+            out[p, 1] = a * x1 + y1
+            out[p, 2] = a * x2 + y2
+            out[p, 3] = a * x3 + y3
+    return axpy4
+
+
+def _packed(fn):
+    """Packed (SIMD) and scalar double multiplications and additions in fn compiled."""
+    import re
+    k = numba.njit(fn)
+    x = np.arange(12.0).reshape(3, 4)
+    out = np.empty((3, 4))
+    k(2.0, x, x, out)
+    assert np.array_equal(out, 3 * x)
+    asm = next(iter(k.inspect_asm().values()))
+    return len(re.findall(r"\bv(?:mul|add)pd\b", asm)), len(re.findall(r"\bv(?:mul|add)sd\b", asm))
+
+
+def test_the_package_kernels_alone_compile_with_the_slp_vectoriser():
+    """`kernel_cache.Vectorise`: a function of this package compiles with SLP vectorisation (its
+    four components in SIMD registers), a function of another module as numba would compile it
+    (SLP off by default), and the setting is numba's own again after each compilation."""
+    before = numba.config.SLP_VECTORIZE
+    other, ours = _axpy4(), _axpy4()
+    ours.__module__ = "skdgmpm.probe"
+    packed_other, scalar_other = _packed(other)
+    packed_ours, scalar_ours = _packed(ours)
+    assert numba.config.SLP_VECTORIZE == before
+    if not before:
+        assert packed_other == 0 and scalar_other > 0
+    assert packed_ours > 0 and scalar_ours == 0
 
 
 def test_kernels_are_filed_under_the_source_digest():
