@@ -5,6 +5,7 @@ the package changes no global setting (numba's SLP vectoriser is on while the pa
 compile, for them only); the first run says when it compiles."""
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -51,7 +52,6 @@ def test_import_sets_nothing_global_and_keeps_the_repository_off_the_package_pat
     assert modules == ["skdgmpm", "skdgmpm.kernel_cache"]     # no kernel module imported, nothing compiled
 
 
-
 def _axpy4():
     def axpy4(a, x, y, out):            # one point's four components: straight-line code
         for p in range(x.shape[0]):
@@ -66,7 +66,6 @@ def _axpy4():
 
 def _packed(fn):
     """Packed (SIMD) and scalar double multiplications and additions in fn compiled."""
-    import re
     k = numba.njit(fn)
     x = np.arange(12.0).reshape(3, 4)
     out = np.empty((3, 4))
