@@ -237,6 +237,17 @@ def _use_threads(n):
     parallel.rows(n * parallel.MIN_ROWS, lambda lo, hi: barrier.wait())
 
 
+class Stepping:
+    """The simulation of ``disc`` (a `build.build` result) stepped once per call, its state kept
+    (``state``): one side of a paired measurement (`alternate`)."""
+
+    def __init__(self, disc):
+        self.stepper, self.state = disc.stepper, disc.initial
+
+    def __call__(self):
+        self.state = self.stepper.step(self.state)
+
+
 def alternate_threads(disc, threads, pairs, warmup):
     """Step the one simulation of ``disc`` (a `build.build` result) on each of the thread counts
     ``threads`` in turn (`alternate`: one step per count a round; any count gives the same bits).
@@ -244,18 +255,13 @@ def alternate_threads(disc, threads, pairs, warmup):
     is restored."""
     from . import parallel
 
-    stepper, state = disc.stepper, disc.initial
-
-    def step():
-        nonlocal state
-        state = stepper.step(state)
-
+    step = Stepping(disc)
     previous = parallel.set_threads(1)
     try:
         cpu, wall = alternate([step] * len(threads), pairs, warmup, before=lambda i: _use_threads(threads[i]))
     finally:
         parallel.set_threads(previous)
-    return cpu, wall, state
+    return cpu, wall, step.state
 
 
 def measure_threads_here(method, n, threads, steps, warmup):

@@ -266,20 +266,14 @@ def measure_pair_here(method, n, steps, warmup):
     import numpy as np
 
     from . import parallel
-    from .bench import alternate, pairs_for, ratios, scene_for
+    from .bench import Stepping, alternate, pairs_for, ratios, scene_for
     from .build import build as build_ours
 
     parallel.set_threads(1)             # the peer is serial: cost per core against cost per core
     ours = COUNTERPART[method]
     scene = scene_for(ours, n)
-    disc = build_ours(scene)
+    step_ours = Stepping(build_ours(scene))
     solver, solution = build(problem(scene), **METHODS[method])
-    stepper, state = disc.stepper, disc.initial
-
-    def step_ours():
-        nonlocal state
-        state = stepper.step(state)
-
     pairs = pairs_for(steps)
     cpu, wall = alternate((step_ours, lambda: solver.evolve_to_time(solution)), pairs, warmup)   # [ours, peer]
     row = {"method": f"{ours}/{method}", "pair": [ours, method], "peer": f"clawpack {version()}",
