@@ -323,6 +323,44 @@ def memory_bandwidth(threads, mib=MEMORY_MIB, repeats=5):
     return speeds
 
 
+HANDOFF_GAP_S = 5e-4       # the main thread's work between two passes of the probe (a step's glue)
+
+
+def handoff(threads, calls=200, gap=HANDOFF_GAP_S):
+    """Seconds of an empty chunked pass (`parallel.rows` over as many chunks as threads, each doing
+    nothing), median of ``calls``, the main thread busy for ``gap`` s between two (the workers
+    idle, as between a step's passes), on each thread count: what a pass costs beyond its work
+    for handing its chunks to the threads. On a VM it is the time to wake an idle virtual CPU, and
+    it varies with the host's load: 14-23 µs and 170-420 µs on two threads of the same VM an hour
+    apart (docs/bench/session20.md)."""
+    from . import parallel
+
+    previous, costs = parallel.set_threads(1), {}
+    try:
+        for t in threads:
+            parallel.set_threads(t)
+            n = t * parallel.MIN_ROWS
+            times = []
+            for _ in range(calls):
+                t0 = time.perf_counter()
+                while time.perf_counter() - t0 < gap:
+                    pass
+                times.append(_timed(lambda: parallel.rows(n, lambda lo, hi: None)))
+            costs[t] = float(np.median(times))
+    finally:
+        parallel.set_threads(previous)
+    return costs
+
+
+def format_handoff(costs):
+    """One line: an empty chunked pass's cost per thread count."""
+    if len(costs) < 2:
+        return ""
+    parts = ", ".join(f"{t} thread{'s' if t > 1 else ''} {1e6 * c:.0f} µs" for t, c in sorted(costs.items()))
+    return (f"hand-off (an empty chunked pass, {1e6 * HANDOFF_GAP_S:.0f} µs after the last): {parts}: each pass "
+            "of a step costs that much beyond its work")
+
+
 def _timed(call):
     t0 = time.perf_counter()
     call()
@@ -416,8 +454,10 @@ def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threa
     counterpart is requested too, paired (`measure_pair`; not without the peer), and, with several
     thread counts (1 among them), every method but the peer's on them all in one process
     (`measure_threads`); write JSON if asked. Returns the rows, the paired rows, the paired scaling
-    rows and, with several thread counts, the memory bandwidth on each (`memory_bandwidth`, else
-    {}). The CPU time per cell of a one-thread row is the cost per core."""
+    rows and the machine's probes: with several thread counts, the memory bandwidth on each
+    (`memory_bandwidth`) and an empty pass's cost (`handoff`), {"memory": {t: GB/s}, "handoff":
+    {t: s}} (empty dicts with one count). The CPU time per cell of a one-thread row is the cost per
+    core."""
     from .run import progress_bar
 
     pairs = [m for m in methods if m in peer.METHODS and peer.COUNTERPART[m] in methods]
@@ -445,10 +485,12 @@ def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threa
             threads_paired.append(measure_threads(method, n, threads, steps, warmup))
             bar.update()
     bar.close()
-    memory = memory_bandwidth(threads) if len(threads) > 1 else {}
+    probes = {"memory": memory_bandwidth(threads) if len(threads) > 1 else {},
+              "handoff": handoff(threads) if len(threads) > 1 else {}}
     if json_path is not None:
-        info = {**machine(), "memory_GBps": {str(t): g for t, g in memory.items()}, "memory_MiB": MEMORY_MIB}
+        info = {**machine(), "memory_GBps": {str(t): g for t, g in probes["memory"].items()}, "memory_MiB": MEMORY_MIB,
+                "handoff_s": {str(t): c for t, c in probes["handoff"].items()}, "handoff_gap_s": HANDOFF_GAP_S}
         with open(json_path, "w") as fh:
             json.dump({"machine": info, "steps": steps, "warmup": warmup, "rows": rows, "paired": paired,
                        "threads_paired": threads_paired}, fh, indent=1)
-    return rows, paired, threads_paired, memory
+    return rows, paired, threads_paired, probes

@@ -152,7 +152,7 @@ def _cmd_bench(args):
     sizes = study._int_list(args.sizes, "--sizes")
     cores = parallel.available()
     threads = study._int_list(args.threads, "--threads") if args.threads else sorted({1, cores})
-    rows, paired, threads_paired, memory = bench.main(methods, sizes, steps=args.steps, warmup=args.warmup,
+    rows, paired, threads_paired, probes = bench.main(methods, sizes, steps=args.steps, warmup=args.warmup,
                                                       json_path=args.json, progress=not args.quiet, threads=threads)
     m = bench.machine()
     print(f"{m['processor']}, {m['cpus']} CPUs, Python {m['python']}")
@@ -161,7 +161,8 @@ def _cmd_bench(args):
     scaling = bench.format_scaling(rows, threads_paired)
     if scaling:
         print("\nthreads (wall time per step, speed-up over one thread):\n" + scaling)
-        print(bench.format_memory(memory))
+        print(bench.format_memory(probes["memory"]))
+        print(bench.format_handoff(probes["handoff"]))
     ratio = peer.format_ratio(rows, paired)
     if ratio:
         print("\nours / peer (CPU time per cell and step, one core):\n" + ratio)

@@ -35,6 +35,9 @@ def test_bench_measures_each_thread_count(tmp_path, capsys):
     # the machine's memory bandwidth on each thread count, beside the scaling it bounds
     assert set(data["machine"]["memory_GBps"]) == {"1", "2"} and min(data["machine"]["memory_GBps"].values()) > 0
     assert "memory (x + a y" in text and "GB/s" in text
+    # and what an empty chunked pass costs on each (the hand-off of its chunks to the threads)
+    assert set(data["machine"]["handoff_s"]) == {"1", "2"} and min(data["machine"]["handoff_s"].values()) > 0
+    assert "hand-off (an empty chunked pass" in text and "2 threads" in text
     # and the same method on both counts in one process, its line after the rows' speed-up
     (scaling,) = data["threads_paired"]
     assert "error" not in scaling and scaling["threads"] == [1, 2] and scaling["pairs"] == bench.PAIRS
@@ -123,3 +126,16 @@ def test_memory_bandwidth_probe_writes_the_triad():
 def test_unknown_benchmark_is_a_clear_error():
     assert main(["bench", "--methods", "dgmpm-xyz", "--sizes", "8", "--quiet"]) == 2
     assert "ader-dgmpm-1" in ", ".join(bench.METHODS)
+
+
+def test_handoff_probe_splits_an_empty_pass_over_each_count(monkeypatch):
+    """The hand-off probe's empty pass is split into as many chunks as threads (the cost it
+    measures is the hand-off to that many), and its line says one cost per count."""
+    from skdgmpm import parallel
+
+    seen, rows = [], parallel.rows
+    monkeypatch.setattr(parallel, "rows", lambda n, call: seen.append(len(parallel.chunks(n))) or rows(n, call))
+    costs = bench.handoff((1, 2, 3), calls=2, gap=0.0)
+    assert set(costs) == {1, 2, 3} and all(c > 0 for c in costs.values()) and seen == [1, 1, 2, 2, 3, 3]
+    line = bench.format_handoff(costs)
+    assert "1 thread " in line and "2 threads " in line and "3 threads " in line and bench.format_handoff({1: 1e-6}) == ""
