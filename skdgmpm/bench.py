@@ -331,7 +331,7 @@ def handoff(threads, calls=200, gap=HANDOFF_GAP_S):
     nothing), median of ``calls``, the main thread busy for ``gap`` s between two (the workers
     idle, as between a step's passes), on each thread count: what a pass costs beyond its work
     for handing its chunks to the threads. On a VM it is the time to wake an idle virtual CPU, and
-    it varies with the host's load: 14-23 µs and 170-420 µs on two threads of the same VM an hour
+    it varies with the host's load: 14-23 µs and 160-420 µs on two threads of the same VM an hour
     apart (docs/bench/session20.md)."""
     from . import parallel
 
