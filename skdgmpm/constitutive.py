@@ -3,7 +3,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from skdgmpm.materials.points import law_table, only_law, stress_tangent_point, stress_update_point, tangent_call
 
@@ -12,7 +12,7 @@ from .equations import embed as _embed_point
 from .health import Health, health_point, identity_if_not, summarise, tally
 from .parallel import row_product
 from . import parallel
-from .kernel_cache import kernel_factory, scratch
+from .kernel_cache import kernel_call, kernel_factory, scratch
 from .system import DIMENSION, embed
 
 
@@ -85,6 +85,35 @@ def _states(d, assess, gathered, slots, split, only):  # literals: the loops unr
                     write_record(q, rho[k], C, normals, row[k], rec, rec_state, n_c, r, d, slots, split)
         return first, J_min, omega_min
     return states
+
+
+_states_call = kernel_call(_states)
+
+
+@kernel_factory(parallel=True)
+def _states_chunks(d, assess, gathered, slots, split, only):
+    def states_chunks(bounds, laws, params, index, U, rho, h_n, h, Q, health, motion, gather, records):
+        """`_states` over the chunks of the points that ``bounds`` delimits, in parallel, the arrays
+        whole: each chunk's (first bad point, min J, smallest eigenvalue) into arrays."""
+        n = len(bounds) - 1
+        first, J_min, omega_min = np.empty(n, np.int64), np.empty(n), np.empty(n)
+        finite, J, lowest, speed, rho_m = health
+        x, v_old, half_dt, x_new = motion
+        indptr, indices, data, nodal = gather
+        rec, row, normals, rec_state = records
+        for c in prange(n):
+            lo, hi = bounds[c], bounds[c + 1]
+            a_lo, a_hi = (lo, hi) if assess else (0, 0)         # health and motion: empty without assess
+            r_lo, r_hi = (lo, hi) if slots else (0, 0)          # the records' rows: none without slots
+            first[c], J_min[c], omega_min[c] = _states_call(
+                d, assess, gathered, slots, split, only, laws, params, index[lo:hi], U[lo:hi], rho[lo:hi],
+                h_n[lo:hi], h[lo:hi], Q[lo:hi],
+                (finite[a_lo:a_hi], J[a_lo:a_hi], lowest[a_lo:a_hi], speed[a_lo:a_hi], rho_m),
+                (x[a_lo:a_hi], v_old[a_lo:a_hi], half_dt, x_new[a_lo:a_hi]),
+                (indptr[lo:hi + 1], indices, data, nodal),
+                (rec, row[r_lo:r_hi], normals, rec_state))
+        return first, J_min, omega_min
+    return states_chunks
 
 
 @kernel_factory
@@ -234,10 +263,19 @@ class MaterialSet:
         else:
             def rows(lo, hi):
                 return health, moved
-        results = parallel.rows(n, lambda lo, hi: kernel(laws, params, index[lo:hi], U[lo:hi], rho[lo:hi],
-                                                         history[lo:hi], h[lo:hi], Q[lo:hi], *rows(lo, hi),
-                                                         (*parallel.csr_rows(A, lo, hi), nodal),
-                                                         (records[0], records[1][lo:hi], *records[2:])))
+        # DGMPM with one particle per cell (its records): the law's pass among the step's compiled
+        # chunk loops (`parallel.compiled_chunks`), like its other passes
+        bounds = parallel.compiled_chunks(n) if slots else None
+        if bounds is not None:
+            chunks = _states_chunks(d, assess, gather is not None, slots, split, only_law(self.laws[0]))
+            first, J_min, omega_min = chunks(bounds, laws, params, index, U, rho, history, h, Q, health, moved,
+                                             (*A, nodal), records)
+            results = [(int(f), float(j), float(w)) for f, j, w in zip(first, J_min, omega_min)]
+        else:
+            results = parallel.rows(n, lambda lo, hi: kernel(laws, params, index[lo:hi], U[lo:hi], rho[lo:hi],
+                                                             history[lo:hi], h[lo:hi], Q[lo:hi], *rows(lo, hi),
+                                                             (*parallel.csr_rows(A, lo, hi), nodal),
+                                                             (records[0], records[1][lo:hi], *records[2:])))
         if not assess:
             return Q, h
         finite, J, lowest, speed, _ = health

@@ -41,8 +41,8 @@ from skdgmpm.materials.points import law_table
 
 from . import parallel, system
 from .dgmpm_kernels import (boundary_edge_corrections, boundary_pass, boundary_sides, cell_corrections, cell_records,
-                            cell_update, euler_update, face_width, integrate_faces, interior_pass,
-                            split_width)
+                            cell_update, corrections_chunks, euler_update, face_width, integrate_faces,
+                            interior_chunks, interior_pass, split_width, update_chunks)
 from .errors import InputError
 from .faces import interior_faces
 from .integrators import INTEGRATORS
@@ -328,15 +328,27 @@ class DGMPM(GodunovScheme):
                                  f.normal[lo:hi], f.cell_L[lo:hi], f.cell_R[lo:hi], self.cell_material, *laws,
                                  (rec, state, normals, k_L[lo:hi], k_R[lo:hi], recorded), ctu, (h_L[sl], n_L[sl]),
                                  (h_R[sl], n_R[sl]), flux[lo:hi], G[sl])
-        bad = parallel.first_bad(len(f), faces)
+        # one particle per cell: the step's chunked passes in numba's compiled chunk loops (none
+        # on the pool, whose workers would compete with numba's spinning ones)
+        bounds = parallel.compiled_chunks(len(f)) if self.cellwise and recorded else None
+        if bounds is not None:
+            bad = interior_chunks(bounds, parallel.csr(T_L), parallel.csr(T_R), grid_state.U, grid_state.Q, rho,
+                                  f.normal, f.cell_L, f.cell_R, self.cell_material, *laws,
+                                  (rec, state, normals, k_L, k_R, recorded), ctu, (h_L, n_L), (h_R, n_R), flux, G)
+        else:
+            bad = parallel.first_bad(len(f), faces)
         if bad >= 0:
             _not_hyperbolic(bad)
         if ctu and recorded:
             sources, scale, signs = self.cell_sources
             W = G.reshape(-1, nc)
-            parallel.rows(n_cells, lambda lo, hi: cell_corrections(
-                sources[lo:hi], scale[lo:hi], signs[lo:hi], _rows(rec, lo, hi), normals[lo:hi], W,
-                corr_bnd))
+            bounds = parallel.compiled_chunks(n_cells) if self.cellwise else None
+            if bounds is not None:
+                corrections_chunks(bounds, sources, scale, signs, rec, normals, W, corr_bnd)
+            else:
+                parallel.rows(n_cells, lambda lo, hi: cell_corrections(
+                    sources[lo:hi], scale[lo:hi], signs[lo:hi], _rows(rec, lo, hi), normals[lo:hi], W,
+                    corr_bnd))
             return flux, G, corr_bnd
         if ctu:
             corr = np.empty((len(f), 1, nc))
@@ -496,8 +508,13 @@ class DGMPM(GodunovScheme):
         if self.cellwise:                       # base, out: the particles'
             weight = (step, self.inv_volume)
             cell, m = self.particles.cell, self.interior.measure
-            parallel.rows(len(base), lambda lo, hi: cell_update(
-                cell[lo:hi], self.cell_faces, m, flux, corr, dt, step, self.inv_volume[lo:hi], base[lo:hi], out[lo:hi]))
+            bounds = parallel.compiled_chunks(len(base))
+            if bounds is not None:
+                update_chunks(bounds, cell, self.cell_faces, m, flux, corr, dt, step, self.inv_volume, base, out)
+            else:
+                parallel.rows(len(base), lambda lo, hi: cell_update(
+                    cell[lo:hi], self.cell_faces, m, flux, corr, dt, step, self.inv_volume[lo:hi], base[lo:hi],
+                    out[lo:hi]))
         else:
             weight = (step, self.inv_M)              # step M^-1, node by node
             csr = parallel.csr_rows

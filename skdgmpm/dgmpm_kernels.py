@@ -30,7 +30,7 @@ by `DGMPM._setup_transverse` (empty arrays for DCU); the interior pass takes (h,
 of each side, face-major so that a chunk of faces is a contiguous slice.
 """
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from skdgmpm.materials.points import only_law, tangent_call, tangent_point, tangent_points
 
@@ -38,7 +38,7 @@ from .equations import (add_normal_flux, ctu_parts, ctu_parts_opposite, ctu_spli
                         impedance, traction)
 from .faces import gather_row
 from .health import identity_if_not
-from .kernel_cache import kernel_factory, scratch
+from .kernel_cache import kernel_call, kernel_factory, scratch
 from .system import DIMENSION, volume_row
 
 
@@ -378,6 +378,43 @@ def _interior_pass(d, slots, recorded, only):  # literals: the loops unrolled, t
     return interior_pass
 
 
+def interior_chunks(bounds, T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params, records, ctu,
+                    topo_L, topo_R, flux, G):
+    """`interior_pass` over the chunks of the faces that ``bounds`` delimits (`parallel.
+    compiled_chunks`), in parallel, each chunk the same kernel on its rows: the same bits. The
+    arrays are whole (the faces' rows sliced per chunk here). Returns the first failing face, or
+    -1."""
+    rec, state, normals, k_L, k_R, recorded = records
+    kernel = _interior_chunks(N.shape[1], normals.shape[1], bool(recorded), only_law(laws))
+    return kernel(bounds, T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params, rec, state, normals,
+                  k_L, k_R, ctu, topo_L, topo_R, flux, G)
+
+
+_interior_call = kernel_call(_interior_pass)
+
+
+@kernel_factory(parallel=True)
+def _interior_chunks(d, slots, recorded, only):
+    def interior_chunks(bounds, T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params, rec, state,
+                        normals, k_L, k_R, ctu, topo_L, topo_R, flux, G):
+        n = len(bounds) - 1
+        bad = np.full(n, -1, np.int64)
+        for c in prange(n):
+            lo, hi = bounds[c], bounds[c + 1]
+            g_lo, g_hi = (lo, hi) if ctu else (0, 0)            # G and the topology: empty without CTU
+            b = _interior_call(d, slots, recorded, only, (T_L[0][lo:hi + 1], T_L[1], T_L[2]),
+                               (T_R[0][lo:hi + 1], T_R[1], T_R[2]), U, Q, rho, N[lo:hi], cell_L[lo:hi],
+                               cell_R[lo:hi], cell_material, laws, params, rec, state, normals, k_L[lo:hi],
+                               k_R[lo:hi], ctu, (topo_L[0][g_lo:g_hi], topo_L[1][g_lo:g_hi]),
+                               (topo_R[0][g_lo:g_hi], topo_R[1][g_lo:g_hi]), flux[lo:hi], G[g_lo:g_hi])
+            bad[c] = lo + b if b >= 0 else -1
+        for c in range(n):
+            if bad[c] >= 0:
+                return bad[c]
+        return -1
+    return interior_chunks
+
+
 @njit(cache=True, inline="always")
 def _split_into(w, C, r, k, topo, f, G, part, slots):
     """`equations.ctu_parts` per unit Delta t (scale -1 / (2 h)) of a fluctuation entering one
@@ -448,6 +485,25 @@ def _cell_corrections(slots):
                         else:
                             corr_bnd[-1 - s, i] = g - g_o
     return cell_corrections
+
+
+def corrections_chunks(bounds, sources, scale, signs, rec, normals, W, corr_bnd):
+    """`cell_corrections` over the chunks of the cells that ``bounds`` delimits, in parallel (the
+    arrays whole; each cell writes only its own faces' rows)."""
+    _corrections_chunks(normals.shape[1])(bounds, sources, scale, signs, rec, normals, W, corr_bnd)
+
+
+_corrections_call = kernel_call(_cell_corrections)
+
+
+@kernel_factory(parallel=True)
+def _corrections_chunks(slots):
+    def corrections_chunks(bounds, sources, scale, signs, rec, normals, W, corr_bnd):
+        for c in prange(len(bounds) - 1):
+            lo, hi = bounds[c], bounds[c + 1]
+            _corrections_call(slots, sources[lo:hi], scale[lo:hi], signs[lo:hi], (rec[0][lo:hi], rec[1][lo:hi]),
+                              normals[lo:hi], W, corr_bnd)
+    return corrections_chunks
 
 
 def face_corrections(corr):
@@ -628,3 +684,23 @@ def _cell_update(nc, sides, n_faces):
             for k in range(nc):
                 out[p, k] = base[p, k] + w * r[k]
     return cell_update
+
+
+def update_chunks(bounds, cell, faces, measure, flux, corr, dt, step, inv_volume, base, out):
+    """`cell_update` over the chunks of the particles that ``bounds`` delimits, in parallel (the
+    particles' arrays whole)."""
+    _update_chunks(flux.shape[1], corr.shape[1], faces.shape[1])(bounds, cell, faces, measure, flux, corr, dt, step,
+                                                                 inv_volume, base, out)
+
+
+_update_call = kernel_call(_cell_update)
+
+
+@kernel_factory(parallel=True)
+def _update_chunks(nc, sides, n_faces):
+    def update_chunks(bounds, cell, faces, measure, flux, corr, dt, step, inv_volume, base, out):
+        for c in prange(len(bounds) - 1):
+            lo, hi = bounds[c], bounds[c + 1]
+            _update_call(nc, sides, n_faces, cell[lo:hi], faces, measure, flux, corr, dt, step, inv_volume[lo:hi],
+                         base[lo:hi], out[lo:hi])
+    return update_chunks

@@ -78,6 +78,7 @@ kernel of this package is actually compiled, i.e. only when the cache misses.
 import functools
 import hashlib
 import importlib.util
+import inspect
 import json
 import os
 import re
@@ -90,7 +91,7 @@ import numba
 from numba import njit, types
 from numba.core import cgutils, config, event
 from numba.core.caching import CacheImpl, _CacheLocator
-from numba.extending import intrinsic
+from numba.extending import intrinsic, overload
 from numba.np.numpy_support import carray
 
 PACKAGE = __name__.rpartition(".")[0]           # "skdgmpm"
@@ -210,11 +211,14 @@ class Vectorise(event.Listener):
 
 
 # ---------------------------------------------------------------- one kernel per literal size
-def kernel_factory(factory):
-    """``factory(*sizes)`` returns a Python function closing over the literal ``sizes`` (ints or
-    None); the decorated name, called with the sizes, returns it compiled (``njit(cache=True,
-    nogil=True)``: threads run it in parallel, `skdgmpm.parallel`), one kernel per distinct sizes,
-    memoised. See the module's docstring."""
+def kernel_factory(factory=None, *, parallel=False):
+    """``factory(*sizes)`` returns a Python function closing over the literal ``sizes`` (ints,
+    bools or None); the decorated name, called with the sizes, returns it compiled
+    (``njit(cache=True, nogil=True)``: threads run it in parallel, `skdgmpm.parallel`), one kernel
+    per distinct sizes, memoised. See the module's docstring. ``@kernel_factory(parallel=True)``:
+    compiled with numba's ``parallel`` (a chunk loop over ``prange``, `kernel_call`)."""
+    if factory is None:
+        return functools.partial(kernel_factory, parallel=parallel)
     kernels = {}
 
     @functools.wraps(factory)
@@ -222,11 +226,41 @@ def kernel_factory(factory):
         try:
             return kernels[sizes]
         except KeyError:
-            k = kernels[sizes] = njit(cache=True, nogil=True)(factory(*sizes))
+            k = kernels[sizes] = njit(cache=True, nogil=True, parallel=parallel)(factory(*sizes))
             return k
 
     kernel.kernels = kernels
     return kernel
+
+
+def kernel_call(factory):
+    """A function ``call(*sizes, *args)`` for compiled code: the kernel of ``factory`` (a
+    `kernel_factory`) for the literal ``sizes`` applied to ``args``, the kernel chosen when the
+    caller is typed. A chunk loop closing over the sizes (plain ints: its cache key is the same in
+    every process) reaches its kernel through it; closing over the kernel itself, a dispatcher,
+    it would never be found in the cache (module docstring)."""
+    n = len(inspect.signature(factory).parameters)
+
+    def call(*args):
+        raise TypeError(f"{factory.__name__}: kernel_call is for compiled code")
+
+    @overload(call)
+    def _call(*args):
+        sizes = []
+        for size in args[:n]:
+            if isinstance(size, types.Literal):
+                sizes.append(size.literal_value)
+            elif isinstance(size, types.NoneType):
+                sizes.append(None)
+            else:
+                return None             # not literal: no kernel to choose
+        kernel = factory(*sizes)
+
+        def impl(*args):
+            return kernel(*args[n:])
+        return impl
+
+    return call
 
 
 # ---------------------------------------------------------------- scratch arrays of a kernel

@@ -18,6 +18,15 @@ order of A's rows, as scipy's A.T @ X visits them), so a scatter into rows becom
 the same bits; where A changes every step (MPM's shape functions), `matmul_T` applies A^T
 without storing it, each chunk of output rows scattering into its own rows only.
 
+Compiled chunk loops: DGMPM with one particle per cell runs its Euler step's four chunked passes (faces,
+cells' corrections, update, law's pass) over the same chunks from a numba ``prange``
+(`compiled_chunks`, the loops in `dgmpm_kernels` and `constitutive`, each reaching its kernel
+through `kernel_cache.kernel_call`) where numba's threading layer is OpenMP or TBB: its threads
+take their chunks without the GIL and without waking from the OS, where each worker of the pool
+below wakes and takes the GIL (docs/bench/session20.md). The same chunks and kernels: the same
+bits. All four passes of that step go one way, so that numba's waiting threads, which spin a
+while, never hold a core that a worker of the pool needs.
+
 The thread count: `set_threads` (the scene key ``run.threads``, ``skdgmpm run --threads``), else
 $SKDGMPM_THREADS, else every core this process may use. A loop shorter than `MIN_ROWS` per thread
 runs in the calling thread (small scenes pay nothing); study workers run one thread each.
@@ -25,8 +34,9 @@ runs in the calling thread (small scenes pay nothing); study workers run one thr
 import os
 from concurrent.futures import ThreadPoolExecutor
 
+import numba
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from .kernel_cache import kernel_factory, scratch
 
@@ -95,6 +105,41 @@ def rows(n, call):
     futures = [_pool.submit(call, lo, hi) for lo, hi in parts[1:]]
     first = call(*parts[0])             # the calling thread takes the first chunk itself
     return [first] + [f.result() for f in futures]
+
+
+def compiled_chunks(n):
+    """The bounds [lo_0, lo_1, ..., n] (int64) of the chunks `rows` would split range(n) into, for
+    a compiled chunk loop (a ``prange`` over them calling the kernel on each: `kernel_cache.
+    kernel_call`), numba's thread count set to their number; None where the loop is better run
+    by `rows`: one chunk, or a threading layer of numba's other than OpenMP and TBB (its
+    ``workqueue`` hands chunks over slower than this module's pool, docs/bench/session20.md).
+    The same chunks, each computed by the same kernel: the same bits as `rows`. numba's
+    threads hand over in microseconds and without the GIL, where the pool's workers each wake
+    and take the GIL (0.06-0.2 ms a pass on two threads, 0.8-1.1 ms on sixteen)."""
+    parts = chunks(n)
+    if len(parts) == 1 or not _compiled_layer():
+        return None
+    numba.set_num_threads(min(len(parts), numba.config.NUMBA_NUM_THREADS))
+    return np.array([lo for lo, _ in parts] + [n], np.int64)
+
+
+_LAYER = None
+
+
+def _compiled_layer():
+    """Whether numba's threading layer runs compiled chunk loops well (OpenMP or TBB): known once
+    a parallel function has run (`_start_layer`)."""
+    global _LAYER
+    if _LAYER is None:
+        _start_layer(np.zeros(2))
+        _LAYER = numba.threading_layer() in ("omp", "tbb")
+    return _LAYER
+
+
+@njit(cache=True, parallel=True)
+def _start_layer(x):
+    for i in prange(len(x)):
+        x[i] = i
 
 
 def first_bad(n, call):

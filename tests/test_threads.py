@@ -65,6 +65,36 @@ def test_bits_do_not_depend_on_the_thread_count(name, monkeypatch):
             assert np.array_equal(one.history, other.history)
 
 
+def test_one_particle_per_cell_steps_in_compiled_chunk_loops(monkeypatch):
+    """DGMPM with one particle per cell runs its step's chunked passes (faces, cells' corrections,
+    update, law's pass) in numba's compiled chunk loops (`parallel.compiled_chunks`), none on the
+    pool, where numba's threading layer is OpenMP or TBB; the states have the pool's bits."""
+    monkeypatch.setattr(parallel, "MIN_ROWS", 16)
+    if not parallel._compiled_layer():
+        pytest.skip(f"numba's threading layer here is {parallel.numba.threading_layer()}: the pool runs the passes")
+    states = []
+    rows = parallel.rows
+    try:
+        for compiled in (True, False):
+            if not compiled:
+                monkeypatch.setattr(parallel, "compiled_chunks", lambda n: None)
+            parallel.set_threads(2)
+            scene, overrides = CASES["dgmpm-ctu"]
+            disc = build(load_scene(scene, overrides))
+            state = disc.stepper.step(disc.initial)         # the first step records its cells on the pool
+            pooled = []
+            monkeypatch.setattr(parallel, "rows", lambda n, call: pooled.append(n) or rows(n, call))
+            for _ in range(STEPS - 1):
+                state = disc.stepper.step(state)
+            monkeypatch.setattr(parallel, "rows", rows)
+            assert (pooled == []) == compiled
+            states.append(state)
+    finally:
+        parallel.set_threads(None)
+    for a, b in zip(*((s.U, s.Q, s.x) for s in states)):
+        assert np.array_equal(a, b)
+
+
 def test_chunks_cover_the_rows_once():
     for n in (0, 1, 5, 4097, 10_000):
         for parts in (1, 2, 3, 7):
