@@ -1,14 +1,16 @@
-"""What the thread pool costs per pass, and what a compiled chunk loop would (docs/bench/session20.md).
+"""What the thread pool costs per pass, and what a compiled chunk loop does (docs/bench/session20.md).
 
     python bench/pool_vs_prange.py [--threads 2,4,8,16] [--json FILE]
 
 On the bench's plate (DGMPM CTU, 256^2), prints:
 - the throughput of independent multiply-adds on t threads (whether the threads get cores of
   their own);
-- per chunked pass of a step (`parallel.rows`), its time and how much longer it takes than its
-  longest chunk, on each thread count (the pool's hand-over: wake-up, GIL, dispatch);
-- the cell update's kernel run per chunk through the pool and from a numba ``prange`` over the
-  same chunk bounds, alternating, with a check that both give the same bits.
+- per chunked pass of a step on the pool (`parallel.rows`; the step's compiled chunk loops turned
+  off), its time and how much longer it takes than its longest chunk, on each thread count (the
+  pool's hand-over: wake-up, GIL, dispatch);
+- the cell update's kernel run per chunk through the pool and from its compiled chunk loop
+  (`dgmpm_kernels.update_chunks`) over the same chunk bounds, alternating, with a check that both
+  give the same bits.
 
 OpenMP's workers wait passively here (``OMP_WAIT_POLICY``), unless it is set: spinning workers
 would hold the cores that the pool's workers need. Timings are measurements on the machine at
@@ -26,7 +28,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numba  # noqa: E402
 import numpy as np  # noqa: E402
-from numba import njit, prange  # noqa: E402
+from numba import njit  # noqa: E402
 
 from skdgmpm import bench, parallel  # noqa: E402
 from skdgmpm import dgmpm_kernels  # noqa: E402
@@ -81,11 +83,12 @@ def pass_costs(stepper, state, counts, steps=8):
         log[caller.f_code.co_name].append((time.perf_counter() - t0, max(chunk)))
         return results
 
-    out = {}
+    out, compiled = {}, parallel.compiled_chunks
     for t in counts:
         parallel.set_threads(t)
         bench._use_threads(t)
         parallel.rows = timed_rows
+        parallel.compiled_chunks = lambda n: None      # the pool's passes, not numba's chunk loops
         try:
             state = stepper.step(state)
             log.clear()
@@ -94,7 +97,7 @@ def pass_costs(stepper, state, counts, steps=8):
                 state = stepper.step(state)
             step = (time.perf_counter() - t0) / steps
         finally:
-            parallel.rows = plain
+            parallel.rows, parallel.compiled_chunks = plain, compiled
         out[t] = {"step_ms": 1e3 * step,
                   "passes": {k: 1e3 * float(np.median([a for a, _ in v])) for k, v in log.items()},
                   "overhead_ms_per_pass": {k: 1e3 * float(np.median([a - b for a, b in v])) for k, v in log.items()}}
@@ -107,12 +110,6 @@ def update_drivers(frame, counts, rounds=80):
     self, base, flux, corr, dt, step = (frame[k] for k in ("self", "base", "flux", "corr", "dt", "step"))
     cell, measure, faces, inv_volume = self.particles.cell, self.interior.measure, self.cell_faces, self.inv_volume
     kernel = dgmpm_kernels._cell_update(flux.shape[1], corr.shape[1], faces.shape[1])
-
-    @njit(parallel=True, nogil=True)
-    def chunked(bounds, cell, faces, measure, flux, corr, dt, step, inv_volume, base, out):
-        for c in prange(len(bounds) - 1):
-            lo, hi = bounds[c], bounds[c + 1]
-            kernel(cell[lo:hi], faces, measure, flux, corr, dt, step, inv_volume[lo:hi], base[lo:hi], out[lo:hi])
 
     n = len(base)
     pooled, compiled = np.empty_like(base), np.empty_like(base)
@@ -129,7 +126,8 @@ def update_drivers(frame, counts, rounds=80):
         bounds = np.array([lo for lo, _ in parallel.chunks(n)] + [n], np.int64)
         sides = [lambda: parallel.rows(n, lambda lo, hi: kernel(cell[lo:hi], faces, measure, flux, corr, dt, step,
                                                                 inv_volume[lo:hi], base[lo:hi], pooled[lo:hi])),
-                 lambda: chunked(bounds, cell, faces, measure, flux, corr, dt, step, inv_volume, base, compiled)]
+                 lambda: dgmpm_kernels.update_chunks(bounds, cell, faces, measure, flux, corr, dt, step, inv_volume,
+                                                     base, compiled)]
         _, wall = bench.alternate(sides, rounds, warmup=2)
         out[t] = {"pool_ms": 1e3 * float(np.median(wall[0])), "prange_ms": 1e3 * float(np.median(wall[1])),
                   "same_bits": bool(np.array_equal(pooled, compiled)), "layer": numba.threading_layer()}
