@@ -12,6 +12,7 @@ Values may depend on time through a `Schedule` (step at t = 0, release at t_u, l
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from .equations import _solve
 from .errors import InputError
@@ -65,22 +66,30 @@ def star_state(frame, imposes_velocity, values, t_L, v_L, Z):
 @kernel_factory
 def _star_states(d):                    # a literal d: the 2d x 2d system unrolled
     def star_states(frame, velocity, values, t_L, v_L, Z, t_s, v_s):
-        A, b, x = scratch((2 * d, 2 * d)), scratch((2 * d,)), scratch((2 * d,))
         for f in range(len(t_L)):
-            for i in range(d):          # unknowns x = [t*, v*]
-                zv = 0.0
-                for j in range(d):
-                    A[i, j] = 1.0 if i == j else 0.0
-                    A[i, d + j] = -Z[f, i, j]
-                    zv += Z[f, i, j] * v_L[f, j]
-                    A[d + i, j] = 0.0 if velocity[f, i] else frame[f, i, j]
-                    A[d + i, d + j] = frame[f, i, j] if velocity[f, i] else 0.0
-                b[i] = t_L[f, i] - zv
-                b[d + i] = values[f, i]
-            _solve(A, b, x, 2 * d)
-            for i in range(d):
-                t_s[f, i], v_s[f, i] = x[i], x[d + i]
+            star_face(frame[f], velocity[f], values[f], t_L[f], v_L[f], Z[f], t_s[f], v_s[f], d)
     return star_states
+
+
+@njit(cache=True, inline="always")
+def star_face(frame, velocity, values, t_L, v_L, Z, t_s, v_s, d):
+    """(t*, v*) of one face into t_s, v_s (d,), the rows of `star_state`'s arrays: its 2d x 2d
+    system (`equations._solve`). Also the boundary pass of first-order DGMPM
+    (`dgmpm_kernels.boundary_faces`)."""
+    A, b, x = scratch((2 * d, 2 * d)), scratch((2 * d,)), scratch((2 * d,))
+    for i in range(d):                  # unknowns x = [t*, v*]
+        zv = 0.0
+        for j in range(d):
+            A[i, j] = 1.0 if i == j else 0.0
+            A[i, d + j] = -Z[i, j]
+            zv += Z[i, j] * v_L[j]
+            A[d + i, j] = 0.0 if velocity[i] else frame[i, j]
+            A[d + i, d + j] = frame[i, j] if velocity[i] else 0.0
+        b[i] = t_L[i] - zv
+        b[d + i] = values[i]
+    _solve(A, b, x, 2 * d)
+    for i in range(d):
+        t_s[i], v_s[i] = x[i], x[d + i]
 
 
 @dataclass(frozen=True)
@@ -197,11 +206,15 @@ class BoundaryGhosts:
             self.schedules.append(bc.schedule)
         self.any_copy = bool(self.copy.any())
 
+    def values_at(self, time):
+        """The imposed values (nb, d) at ``time`` (each group's schedule applied)."""
+        amplitude = np.array([schedule(time) for schedule in self.schedules])
+        return self.values * amplitude[self.group][:, None]
+
     def star(self, time, t_L, v_L, Z):
         """(t*, v*) (nb, d) of every boundary face at ``time``."""
-        amplitude = np.array([schedule(time) for schedule in self.schedules])
         t_L, v_L, Z = (np.ascontiguousarray(a, dtype=float) for a in (t_L, v_L, Z))
-        t_s, v_s = star_state(self.frame, self.velocity, self.values * amplitude[self.group][:, None], t_L, v_L, Z)
+        t_s, v_s = star_state(self.frame, self.velocity, self.values_at(time), t_L, v_L, Z)
         if self.any_copy:
             t_s[self.copy], v_s[self.copy] = t_L[self.copy], v_L[self.copy]
         return t_s, v_s

@@ -40,9 +40,9 @@ import scipy.sparse as sp
 from skdgmpm.materials.points import law_table
 
 from . import parallel, system
-from .dgmpm_kernels import (boundary_edge_corrections, boundary_pass, boundary_sides, cell_corrections, cell_records,
-                            cell_update, corrections_chunks, euler_update, face_width, integrate_faces,
-                            interior_chunks, interior_pass, split_width, update_chunks)
+from .dgmpm_kernels import (boundary_chunks, boundary_corrections, boundary_edge_corrections, boundary_faces,
+                            boundary_terms, cell_corrections, cell_records, cell_update, corrections_chunks, euler_update,
+                            face_width, interior_chunks, interior_pass, split_width, update_chunks)
 from .errors import InputError
 from .faces import interior_faces
 from .integrators import INTEGRATORS
@@ -365,24 +365,28 @@ class DGMPM(GodunovScheme):
         cells added to the interior faces' ``corr`` and the boundary faces' ``corr_bnd``
         (`interface_flux`'s): like the interior faces', they depend on Delta t only through that
         factor (`fixed_terms`). Returns the fluxes and (t*, v*)."""
-        b, d = self.boundary, self.d
-        nb = len(b)
-        t_L, v_L, Z, rho = np.empty((nb, d)), np.empty((nb, d)), np.empty((nb, d, d)), np.empty(nb)
-        C = np.empty((nb, d, d, d, d))
-        bad = boundary_sides(self.traces["boundary"], grid_state.U, grid_state.Q, self.density, b.normal,
-                             b.cell_L, self.cell_material, *self.laws, t_L, v_L, Z, C, rho)
+        b, d, g, ctu = self.boundary, self.d, self.ghosts, self.ctu is not None
+        nb, nc = len(b), system.n_components(d)
+        flux, t_s, v_s = np.empty((nb, nc)), np.empty((nb, d)), np.empty((nb, d))
+        parts = self._buffer("boundary parts", (nb if ctu else 0, 2, nc))
+        args = (self.traces["boundary"], grid_state.U, grid_state.Q, self.density, b.normal, b.cell_L,
+                self.cell_material, *self.laws, (g.frame, g.velocity, g.values_at(time), g.copy), ctu,
+                self.topology["boundary"], flux, t_s, v_s, parts)
+        # a face costs about ten interior faces (the law's tangent, its stationary state): chunks of
+        # an eighth of the rows pay on numba's threads (the step's other passes' with one particle per cell)
+        bounds = parallel.compiled_chunks(nb, max(1, parallel.MIN_ROWS // 8)) if self.cellwise else None
+        if bounds is not None:
+            bad = boundary_chunks(bounds, *args)
+        else:
+            bad = parallel.first_bad(nb, lambda lo, hi: boundary_faces(lo, hi, *args))
         if bad >= 0:
             _not_hyperbolic(bad)
-        t_s, v_s = self.ghosts.star(time, t_L, v_L, Z)
-        flux = np.zeros((nb, system.n_components(d)))
-        bad = boundary_pass(b.normal, t_L, v_L, t_s, v_s, C, rho, self.ctu is not None, self.topology["boundary"],
-                            flux, corr, corr_bnd)
-        if bad >= 0:
-            _not_hyperbolic(bad)
+        if ctu:
+            boundary_corrections(self.topology["boundary"], parts, corr, corr_bnd)
         return flux, t_s, v_s
 
     @stage
-    def transverse_flux(self, corr_bnd):
+    def transverse_flux(self, terms, dt, weight, out):
         """CTU [R18 eq 34-37] at boundary faces: keep the components of the corrections that the
         condition leaves free, so it still holds exactly. (Each fluctuation entering a cell is split
         on the characteristic basis of the cell's two edges adjacent to the source face; the part
@@ -390,8 +394,19 @@ class DGMPM(GodunovScheme):
         size across the source face; at a boundary edge the ghost cell is a copy of the cell and
         sends back the cell's own correction through the opposite edge. The face passes compute
         them with the fluxes.) The filter is linear: its matrix per face is built once
-        (``_boundary_filter``)."""
-        return np.einsum("fkj,fj->fk", self.ctu, corr_bnd)
+        (``_boundary_filter``). The boundary faces' fluxes so corrected are integrated in the same
+        pass (`dgmpm_kernels.boundary_terms`). Returns the power through the boundary (W)."""
+        return self._boundary_terms(terms, dt, weight, out)
+
+    def _boundary_terms(self, terms, dt, weight, out):
+        """out += weight (-int Phi F over the boundary faces), F their fluxes with (CTU) the
+        filtered corrections for ``dt``; returns the power through them (W)."""
+        b = self.boundary
+        _, _, corr_bnd, flux, t_s, v_s = terms
+        work = np.empty(len(b))
+        boundary_terms(self.traces["boundary"], b.measure, b.normal, flux, t_s, v_s, self.ctu, corr_bnd, dt, weight,
+                       out, work)
+        return float(np.sum(work))
 
     def side_topology(self, side):
         """CTU topology of one face side ("L", "R" of the interior faces, "boundary"): the
@@ -479,16 +494,10 @@ class DGMPM(GodunovScheme):
         t-dependent part of M dU/dt (the boundary faces' fluxes with their CTU corrections for
         ``dt``), weighted per node by weight = (step, inv_M): step inv_M[i]; ``terms``:
         `fixed_terms`. Returns the power through the boundary (W)."""
-        b = self.boundary
-        _, _, corr_bnd, flux, t_s, v_s = terms
         if self.ctu is None:
-            power = float(np.sum(b.measure * np.einsum("fi,fi->f", t_s, v_s)))
-        else:                                               # work of the corrected boundary flux
-            flux = flux + self.transverse_flux(dt * corr_bnd)
-            F, p = system.split(flux, self.d)
-            v = -np.einsum("fia,fa->fi", F, b.normal)
-            power = float(np.sum(b.measure * np.einsum("fi,fi->f", -p, v)))
-        integrate_faces(self.traces["boundary"], b.measure, -1.0, flux, weight, out)
+            power = self._boundary_terms(terms, dt, weight, out)
+        else:
+            power = self.transverse_flux(terms, dt, weight, out)
         if self.body_force is not None:          # int Phi rho0 b, the particles as quadrature
             p = self.particles
             source = self.source(p, time)

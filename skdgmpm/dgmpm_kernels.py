@@ -36,6 +36,7 @@ from skdgmpm.materials.points import only_law, tangent_call, tangent_point, tang
 
 from .equations import (add_normal_flux, ctu_parts, ctu_parts_opposite, ctu_split, embed, fluctuations, godunov,
                         impedance, traction)
+from .bcs import star_face
 from .faces import gather_row
 from .health import identity_if_not
 from .kernel_cache import kernel_call, kernel_factory, scratch
@@ -408,11 +409,17 @@ def _interior_chunks(d, slots, recorded, only):
                                k_R[lo:hi], ctu, (topo_L[0][g_lo:g_hi], topo_L[1][g_lo:g_hi]),
                                (topo_R[0][g_lo:g_hi], topo_R[1][g_lo:g_hi]), flux[lo:hi], G[g_lo:g_hi])
             bad[c] = lo + b if b >= 0 else -1
-        for c in range(n):
-            if bad[c] >= 0:
-                return bad[c]
-        return -1
+        return _first_failing(bad)
     return interior_chunks
+
+
+@njit(cache=True, inline="always")
+def _first_failing(bad):
+    """The first failing row of a chunk loop (bad: each chunk's first, or -1), or -1."""
+    for c in range(len(bad)):
+        if bad[c] >= 0:
+            return bad[c]
+    return -1
 
 
 @njit(cache=True, inline="always")
@@ -528,75 +535,156 @@ def boundary_edge_corrections(to_boundary, G, corr_bnd):
 
 
 # ---------------------------------------------------------------- boundary faces
-def boundary_sides(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v_L, Z, C, rho_f):
-    """Interior side of every boundary face: traction t_L, velocity v_L (nf, d), impedance
-    Z = sqrt(rho0 A_N) (nf, d, d), tangent C (nf, d, d, d, d) and density rho_f (nf,). Returns the
-    first face whose acoustic tensor is not positive definite, or -1."""
-    kernel = _boundary_sides(N.shape[1], only_law(laws))
-    return kernel(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v_L, Z, C, rho_f)
+def boundary_faces(lo, hi, T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, flux, t_s, v_s,
+                   parts):
+    """Boundary faces lo:hi (absolute rows of every array): each face's interior side (traction
+    t_L, velocity v_L, impedance Z = sqrt(rho0 A_N), tangent C, density), its stationary state
+    (t*, v*) into t_s, v_s (nf, d) (`bcs.star_face` under the face's condition, ``ghosts`` =
+    (frame (nf, d, d), imposes velocity (nf, d), values at the time (nf, d), copies the interior
+    (nf,)), `bcs.BoundaryGhosts`), its flux F_N(t*, v*) into flux (nf, nc) and, with ``ctu``,
+    the transverse corrections per unit Delta t of the fluctuation F_N(t*, v*) - F_N(t_L, v_L)
+    entering the cell along its two edges adjacent to the face into parts (nf, 2, nc)
+    (`boundary_corrections` adds them where they go). Each face writes its own rows: chunks run
+    in parallel. Returns the first face (from lo) whose acoustic tensor, along the face or (CTU)
+    an edge, is not positive definite, or -1."""
+    kernel = _boundary_faces(N.shape[1], only_law(laws))
+    return kernel(lo, hi, T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, flux, t_s, v_s,
+                  parts)
 
 
 @kernel_factory
-def _boundary_sides(d, only):
-    def boundary_sides(T, U, Q, rho, N, cell, cell_material, laws, params, t_L, v_L, Z, C, rho_f):
+def _boundary_faces(d, only):
+    def boundary_faces(lo, hi, T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, flux, t_s,
+                       v_s, parts):
         dd, nc = d * d, d * d + d
-        q, F, Zi = scratch((nc,)), scratch((3, 3)), scratch((d, d))
-        for f in range(len(N)):
-            rho_f[f] = _gather(T, f, U, Q, rho, q, F, d)
+        q, F, Zi, w = scratch((nc,)), scratch((3, 3)), scratch((d, d)), scratch((nc,))
+        t_L, v_L, Z, C = scratch((d,)), scratch((d,)), scratch((d, d)), scratch((d, d, d, d))
+        frame, velocity, values, copy = ghosts
+        for f in range(lo, hi):
+            rho_f = _gather(T, f, U, Q, rho, q, F, d)
             m = cell_material[cell[f]]
             if d == 1:
-                tangent_call(laws, params, m, F, C[f], d)
+                tangent_call(laws, params, m, F, C, d)
             else:
-                tangent_point(laws, params, m, only, F, C[f], d)
-            traction(q, N[f], t_L[f], d)
+                tangent_point(laws, params, m, only, F, C, d)
+            traction(q, N[f], t_L, d)
             for i in range(d):
-                v_L[f, i] = q[dd + i]
-            if not impedance(C[f], N[f], rho_f[f], Z[f], Zi, d):
-                return f
-        return -1
-    return boundary_sides
-
-
-def boundary_pass(N, t_L, v_L, t_s, v_s, C, rho_f, ctu, topo, flux, corr, corr_bnd):
-    """Flux F_N(t*, v*) of every boundary face added to flux (nf, nc) (zero on entry) and, with
-    ``ctu``, the transverse corrections per unit Delta t of the fluctuation F_N(t*, v*) -
-    F_N(t_L, v_L) entering the cell: an interior edge's added to the interior faces' corrections
-    ``corr`` (nf, sides, nc) as `interface_flux` keeps them (sides 2: into the row of the side
-    whose cell sends it, sides 1: with the edge's sign; `face_corrections`), a boundary edge's to
-    corr_bnd. Serial (boundary faces next to one edge write the same rows; few faces). Returns
-    the first face whose acoustic tensor along an edge is not positive definite, or -1."""
-    return _boundary_pass(N.shape[1])(N, t_L, v_L, t_s, v_s, C, rho_f, ctu, topo, flux, corr, corr_bnd)
-
-
-@kernel_factory
-def _boundary_pass(d):
-    def boundary_pass(N, t_L, v_L, t_s, v_s, C, rho_f, ctu, topo, flux, corr, corr_bnd):
-        w = scratch((d * d + d,))
-        sides = corr.shape[1]
-        for f in range(len(N)):
+                v_L[i] = q[dd + i]
+            if not impedance(C, N[f], rho_f, Z, Zi, d):
+                return f - lo
+            if copy[f]:                     # nothing imposed: the ghost is the interior
+                for i in range(d):
+                    t_s[f, i], v_s[f, i] = t_L[i], v_L[i]
+            else:
+                star_face(frame[f], velocity[f], values[f], t_L, v_L, Z, t_s[f], v_s[f], d)
+            for k in range(nc):
+                flux[f, k] = 0.0
             add_normal_flux(t_s[f], v_s[f], N[f], 1.0, flux[f], d)
             if d == 2 and ctu:              # the fluctuation F_N(t*, v*) - F_N(t_L, v_L) entering the cell
                 for k in range(6):
                     w[k] = flux[f, k]
-                add_normal_flux(t_L[f], v_L[f], N[f], -1.0, w, d)
-                h, normals, edge_int, edge_bnd, sign = topo
-                ok, G_0, G_1 = ctu_split(w, C[f], rho_f[f], -1.0 / (2.0 * h[f]), normals[0, f, 0], normals[0, f, 1],
+                add_normal_flux(t_L, v_L, N[f], -1.0, w, d)
+                h, normals = topo[0], topo[1]
+                ok, G_0, G_1 = ctu_split(w, C, rho_f, -1.0 / (2.0 * h[f]), normals[0, f, 0], normals[0, f, 1],
                                          normals[1, f, 0], normals[1, f, 1])
                 if not ok:
-                    return f
-                for e in range(2):
-                    j = edge_int[e, f]
-                    if j >= 0:
-                        s = sign[e, f]
-                        for k in range(6):
-                            g = G_0[k] if e == 0 else G_1[k]
-                            if sides == 2:          # the part the cell sends: its side's row
-                                corr[j, 0 if s > 0 else 1, k] += g
-                            else:
-                                corr[j, 0, k] += s * g
-                _add_boundary_edges(edge_bnd, f, G_0, G_1, corr_bnd)
+                    return f - lo
+                for k in range(6):
+                    parts[f, 0, k], parts[f, 1, k] = G_0[k], G_1[k]
         return -1
-    return boundary_pass
+    return boundary_faces
+
+
+def boundary_chunks(bounds, T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, flux, t_s, v_s,
+                    parts):
+    """`boundary_faces` over the chunks that ``bounds`` delimits (`parallel.compiled_chunks`), in
+    parallel: the same bits. Returns the first failing face, or -1."""
+    kernel = _boundary_chunks(N.shape[1], only_law(laws))
+    return kernel(bounds, T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, flux, t_s, v_s,
+                  parts)
+
+
+_boundary_call = kernel_call(_boundary_faces)
+
+
+@kernel_factory(parallel=True)
+def _boundary_chunks(d, only):
+    def boundary_chunks(bounds, T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, flux, t_s,
+                        v_s, parts):
+        n = len(bounds) - 1
+        bad = np.full(n, -1, np.int64)
+        for c in prange(n):
+            lo, hi = bounds[c], bounds[c + 1]
+            b = _boundary_call(d, only, lo, hi, T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo,
+                               flux, t_s, v_s, parts)
+            bad[c] = lo + b if b >= 0 else -1
+        return _first_failing(bad)
+    return boundary_chunks
+
+
+@njit(cache=True, nogil=True)
+def boundary_corrections(topo, parts, corr, corr_bnd):
+    """The boundary faces' CTU parts (nf, 2, nc) (`boundary_faces`) added where they go, face by
+    face: an interior edge's to the interior faces' corrections ``corr`` (nf, sides, nc) as
+    `interface_flux` keeps them (sides 2: into the row of the side whose cell sends it, sides 1:
+    with the edge's sign; `face_corrections`), a boundary edge's to corr_bnd. Serial: boundary
+    faces next to one edge write the same rows."""
+    _, _, edge_int, edge_bnd, sign = topo
+    sides = corr.shape[1]
+    for f in range(len(parts)):
+        for e in range(2):
+            j = edge_int[e, f]
+            if j >= 0:
+                s = sign[e, f]
+                for k in range(6):
+                    if sides == 2:              # the part the cell sends: its side's row
+                        corr[j, 0 if s > 0 else 1, k] += parts[f, e, k]
+                    else:
+                        corr[j, 0, k] += s * parts[f, e, k]
+        _add_boundary_edges(edge_bnd, f, parts[f, 0], parts[f, 1], corr_bnd)
+
+
+def boundary_terms(T, measure, N, flux, t_s, v_s, ctu, corr_bnd, dt, weight, R, work):
+    """R += w (-int Phi F over the boundary faces), F their flux (nf, nc) plus, where a CTU filter
+    (nf, nc, nc) is given as ``ctu``, its filtered corrections ctu (dt corr_bnd) (`DGMPM.
+    transverse_flux`), weighted per node by w = (step, inv_M) as in `_integrate`; the power
+    through each face, measure t . v (t = P N, v its velocity: (t*, v*) without CTU, read off
+    F with it), into work (nf,)."""
+    _boundary_terms(N.shape[1], ctu is not None)(T, measure, N, flux, t_s, v_s, _NO_FILTER if ctu is None else ctu,
+                                                 corr_bnd, dt, weight, R, work)
+
+
+_NO_FILTER = np.zeros((0, 0, 0))
+
+
+@kernel_factory
+def _boundary_terms(d, ctu):
+    def boundary_terms(T, measure, N, flux, t_s, v_s, filt, corr_bnd, dt, weight, R, work):
+        dd, nc = d * d, d * d + d
+        g, c = scratch((nc,)), scratch((nc,))
+        for f in range(len(measure)):
+            e = 0.0
+            if ctu:
+                for j in range(nc):
+                    c[j] = dt * corr_bnd[f, j]
+                for k in range(nc):
+                    a = 0.0
+                    for j in range(nc):
+                        a += filt[f, k, j] * c[j]
+                    g[k] = flux[f, k] + a
+                for i in range(d):          # t = -p, v = -F N of the corrected flux
+                    v = 0.0
+                    for b in range(d):
+                        v += g[i * d + b] * N[f, b]
+                    e += (-g[dd + i]) * (-v)
+            else:
+                for k in range(nc):
+                    g[k] = flux[f, k]
+                for i in range(d):
+                    e += t_s[f, i] * v_s[f, i]
+            work[f] = measure[f] * e
+            _integrate(T, f, -1.0 * measure[f], g, weight, R)
+    return boundary_terms
 
 
 def euler_update(gather, flux, corr, dt, Q, stiffness, base, weight, out):

@@ -88,9 +88,10 @@ def bounds(n, parts):
     return [(n * k // parts, n * (k + 1) // parts) for k in range(parts)]
 
 
-def chunks(n):
-    """The (lo, hi) chunks `rows` splits range(n) into."""
-    return bounds(n, min(threads(), max(1, n // MIN_ROWS)))
+def chunks(n, min_rows=None):
+    """The (lo, hi) chunks `rows` splits range(n) into: one per thread, of ``min_rows`` rows at
+    least (default `MIN_ROWS`)."""
+    return bounds(n, min(threads(), max(1, n // (min_rows or MIN_ROWS))))
 
 
 def rows(n, call):
@@ -107,8 +108,8 @@ def rows(n, call):
     return [first] + [f.result() for f in futures]
 
 
-def compiled_chunks(n):
-    """The bounds [lo_0, lo_1, ..., n] (int64) of the chunks `rows` would split range(n) into, for
+def compiled_chunks(n, min_rows=None):
+    """The bounds [lo_0, lo_1, ..., n] (int64) of the chunks of range(n) (`chunks`), for
     a compiled chunk loop (a ``prange`` over them calling the kernel on each: `kernel_cache.
     kernel_call`), numba's thread count set to their number; None where the loop is better run
     by `rows`: one chunk, or a threading layer of numba's other than OpenMP and TBB (its
@@ -116,7 +117,7 @@ def compiled_chunks(n):
     The same chunks, each computed by the same kernel: the same bits as `rows`. numba's
     threads hand over in microseconds and without the GIL, where the pool's workers each wake
     and take the GIL (0.06-0.2 ms a pass on two threads, 0.8-1.1 ms on sixteen)."""
-    parts = chunks(n)
+    parts = chunks(n, min_rows)
     if len(parts) == 1 or not _compiled_layer():
         return None
     numba.set_num_threads(min(len(parts), numba.config.NUMBA_NUM_THREADS))

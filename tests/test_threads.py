@@ -77,7 +77,7 @@ def test_one_particle_per_cell_steps_in_compiled_chunk_loops(monkeypatch):
     try:
         for compiled in (True, False):
             if not compiled:
-                monkeypatch.setattr(parallel, "compiled_chunks", lambda n: None)
+                monkeypatch.setattr(parallel, "compiled_chunks", lambda n, min_rows=None: None)
             parallel.set_threads(2)
             scene, overrides = CASES["dgmpm-ctu"]
             disc = build(load_scene(scene, overrides))
