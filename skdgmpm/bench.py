@@ -306,7 +306,8 @@ MEMORY_MIB = 64            # each array of the memory probe: far past the caches
 def memory_bandwidth(threads, mib=MEMORY_MIB, repeats=5):
     """GB/s of the triad out = x + a y (`parallel.add_scaled`, three arrays of ``mib`` MiB: read
     two, write one) on each thread count, best of ``repeats``: what a pass bound by memory can
-    gain from more threads on this machine (arithmetic scales with the cores, bandwidth may not)."""
+    gain from more threads on this machine (bandwidth may not grow with the cores; `arithmetic`
+    gives the other bound)."""
     from . import parallel
 
     n = mib * 2 ** 20 // 8
@@ -321,6 +322,46 @@ def memory_bandwidth(threads, mib=MEMORY_MIB, repeats=5):
     finally:
         parallel.set_threads(previous)
     return speeds
+
+
+ARITHMETIC_ROWS = 16384     # each thread's share of the arithmetic probe: 128 kB, in its core's cache
+
+
+def arithmetic(threads, rounds=200, repeats=5):
+    """The speed-up of arithmetic on each thread count: each of t chunks of a pass (`parallel.rows`)
+    takes ``rounds`` rounds of exp and sqrt over its own ARITHMETIC_ROWS numbers (in cache; numpy
+    releases the GIL), best of ``repeats``; t times the work per second of one thread. What a
+    pass bound by its arithmetic can gain from more threads now: on a VM whose virtual cores share
+    their host's cores with other guests, less than t (x1.27-1.95 on two threads of this
+    project's VM within an hour, docs/bench/session21.md)."""
+    from . import parallel
+
+    def work(lo, hi):
+        x = np.linspace(0.1, 1.0, ARITHMETIC_ROWS)
+        y = np.empty_like(x)
+        for _ in range(rounds):
+            np.exp(x, out=y)
+            np.sqrt(y, out=y)
+
+    previous, times = parallel.set_threads(1), {}
+    try:
+        for t in threads:
+            parallel.set_threads(t)
+            n = t * parallel.MIN_ROWS
+            parallel.rows(n, work)                          # the workers started
+            times[t] = min(_timed(lambda: parallel.rows(n, work)) for _ in range(repeats))
+    finally:
+        parallel.set_threads(previous)
+    return {t: t * times[threads[0]] / (threads[0] * times[t]) for t in threads}
+
+
+def format_arithmetic(speedups):
+    """One line: the arithmetic probe's speed-up per thread count."""
+    if len(speedups) < 2 or 1 not in speedups:
+        return ""
+    parts = ", ".join(f"{t} thread{'s' if t > 1 else ''} x{x:.2f}" for t, x in sorted(speedups.items()))
+    return (f"arithmetic (exp, sqrt on {ARITHMETIC_ROWS} numbers in cache per thread): {parts}: a pass bound by its "
+            "arithmetic speeds up at most about that much")
 
 
 HANDOFF_GAP_S = 5e-4       # the main thread's work between two passes of the probe (a step's glue)
@@ -373,8 +414,7 @@ def format_memory(speeds, mib=MEMORY_MIB):
         return ""
     parts = ", ".join(f"{t} thread{'s' if t > 1 else ''} {g:.1f} GB/s (x{g / speeds[1]:.2f})"
                       for t, g in sorted(speeds.items()))
-    return (f"memory (x + a y, 3 x {mib} MiB): {parts}: a pass bound by memory speeds up at most about that "
-            "much; arithmetic scales with the cores")
+    return f"memory (x + a y, 3 x {mib} MiB): {parts}: a pass bound by memory speeds up at most about that much"
 
 
 def machine():
@@ -455,8 +495,9 @@ def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threa
     thread counts (1 among them), every method but the peer's on them all in one process
     (`measure_threads`); write JSON if asked. Returns the rows, the paired rows, the paired scaling
     rows and the machine's probes: with several thread counts, the memory bandwidth on each
-    (`memory_bandwidth`) and an empty pass's cost (`handoff`), {"memory": {t: GB/s}, "handoff":
-    {t: s}} (empty dicts with one count). The CPU time per cell of a one-thread row is the cost per
+    (`memory_bandwidth`), the speed-up of arithmetic (`arithmetic`) and an empty pass's cost
+    (`handoff`), {"memory": {t: GB/s}, "arithmetic": {t: x}, "handoff": {t: s}} (empty dicts with
+    one count). The CPU time per cell of a one-thread row is the cost per
     core."""
     from .run import progress_bar
 
@@ -486,9 +527,11 @@ def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threa
             bar.update()
     bar.close()
     probes = {"memory": memory_bandwidth(threads) if len(threads) > 1 else {},
+              "arithmetic": arithmetic(threads) if len(threads) > 1 else {},
               "handoff": handoff(threads) if len(threads) > 1 else {}}
     if json_path is not None:
         info = {**machine(), "memory_GBps": {str(t): g for t, g in probes["memory"].items()}, "memory_MiB": MEMORY_MIB,
+                "arithmetic_speedup": {str(t): x for t, x in probes["arithmetic"].items()},
                 "handoff_s": {str(t): c for t, c in probes["handoff"].items()}, "handoff_gap_s": HANDOFF_GAP_S}
         with open(json_path, "w") as fh:
             json.dump({"machine": info, "steps": steps, "warmup": warmup, "rows": rows, "paired": paired,

@@ -162,6 +162,7 @@ def _cmd_bench(args):
     if scaling:
         print("\nthreads (wall time per step, speed-up over one thread):\n" + scaling)
         print(bench.format_memory(probes["memory"]))
+        print(bench.format_arithmetic(probes["arithmetic"]))
         print(bench.format_handoff(probes["handoff"]))
     ratio = peer.format_ratio(rows, paired)
     if ratio:

@@ -35,6 +35,10 @@ def test_bench_measures_each_thread_count(tmp_path, capsys):
     # the machine's memory bandwidth on each thread count, beside the scaling it bounds
     assert set(data["machine"]["memory_GBps"]) == {"1", "2"} and min(data["machine"]["memory_GBps"].values()) > 0
     assert "memory (x + a y" in text and "GB/s" in text
+    # and the speed-up of arithmetic on each, the other bound of a pass's scaling
+    assert set(data["machine"]["arithmetic_speedup"]) == {"1", "2"}
+    assert data["machine"]["arithmetic_speedup"]["1"] == 1.0 and data["machine"]["arithmetic_speedup"]["2"] > 0
+    assert "arithmetic (exp, sqrt on" in text
     # and what an empty chunked pass costs on each (the hand-off of its chunks to the threads)
     assert set(data["machine"]["handoff_s"]) == {"1", "2"} and min(data["machine"]["handoff_s"].values()) > 0
     assert "hand-off (an empty chunked pass" in text and "2 threads" in text
@@ -121,6 +125,19 @@ def test_memory_bandwidth_probe_writes_the_triad():
     speeds = bench.memory_bandwidth((1, 2), mib=1, repeats=1)
     assert set(speeds) == {1, 2} and all(g > 0 for g in speeds.values())
     assert "x1.00" in bench.format_memory(speeds) and bench.format_memory({1: 3.0}) == ""
+
+
+def test_arithmetic_probe_gives_each_thread_count_its_share(monkeypatch):
+    """The arithmetic probe's pass is split into as many chunks as threads, each doing the same
+    work: the speed-up is t times one thread's rate over t threads' rate, 1 for one thread."""
+    from skdgmpm import parallel
+
+    seen, rows = [], parallel.rows
+    monkeypatch.setattr(parallel, "rows", lambda n, call: seen.append(len(parallel.chunks(n))) or rows(n, call))
+    speedups = bench.arithmetic((1, 2), rounds=2, repeats=1)
+    assert seen == [1, 1, 2, 2] and speedups[1] == 1.0 and speedups[2] > 0
+    line = bench.format_arithmetic(speedups)
+    assert "1 thread x1.00" in line and "2 threads x" in line and bench.format_arithmetic({1: 1.0}) == ""
 
 
 def test_unknown_benchmark_is_a_clear_error():
