@@ -11,7 +11,8 @@ One step is the list of named stages of R18 §5 (a)-(h):
 per cell the faces keep their fluctuations and each cell splits the sum of those entering it
 through the two faces next to each of its edges (`cell_corrections`: B+ is linear); otherwise
 each fluctuation is split at its face as soon as it is known and the edges gather the parts.
-``transverse_flux`` only filters the boundary faces' corrections; DCU leaves them out. ``source`` adds
+``transverse_flux`` filters the boundary faces' corrections (and integrates those faces in the same
+pass); DCU leaves them out. ``source`` adds
 int Phi rho0 b = sum_p S_ip V_p rho0 b(X_p, t) when a body force is set (particle quadrature, at
 the time the boundary values are taken).
 
