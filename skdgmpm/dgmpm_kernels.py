@@ -725,14 +725,6 @@ def _euler_update(nc, sides):           # literals: the loops unrolled, the corr
     return euler_update
 
 
-@njit(cache=True, nogil=True)
-def integrate_faces(T, measure, scale, flux, w, R):
-    """R += w scale T^T (measure flux): the surface integral of face-constant fluxes (nf, nc), in
-    face order, weighted per node by w = (step, inv_M) as in `_integrate`."""
-    for f in range(len(measure)):
-        _integrate(T, f, scale * measure[f], flux[f], w, R)
-
-
 # ---------------------------------------------------------------- one particle per cell
 def cell_update(cell, faces, measure, flux, corr, dt, step, inv_volume, base, out):
     """out[p] = base[p] + step / V_p sum_k s_k m_f (F*_f + dt corr_f) over the interior faces f of
