@@ -352,7 +352,8 @@ def arithmetic(threads, rounds=200, repeats=5):
             times[t] = min(_timed(lambda: parallel.rows(n, work)) for _ in range(repeats))
     finally:
         parallel.set_threads(previous)
-    return {t: t * times[threads[0]] / (threads[0] * times[t]) for t in threads}
+    base = 1 if 1 in times else threads[0]          # the work per second of one thread, if measured
+    return {t: t * times[base] / (base * times[t]) for t in threads}
 
 
 def format_arithmetic(speedups):

@@ -138,6 +138,8 @@ def test_arithmetic_probe_gives_each_thread_count_its_share(monkeypatch):
     assert seen == [1, 1, 2, 2] and speedups[1] == 1.0 and speedups[2] > 0
     line = bench.format_arithmetic(speedups)
     assert "1 thread x1.00" in line and "2 threads x" in line and bench.format_arithmetic({1: 1.0}) == ""
+    # relative to one thread in whatever order the counts come (--threads 2,1)
+    assert bench.arithmetic((2, 1), rounds=2, repeats=1)[1] == 1.0
 
 
 def test_unknown_benchmark_is_a_clear_error():
