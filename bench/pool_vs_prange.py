@@ -88,7 +88,7 @@ def pass_costs(stepper, state, counts, steps=8):
         parallel.set_threads(t)
         bench._use_threads(t)
         parallel.rows = timed_rows
-        parallel.compiled_chunks = lambda n: None      # the pool's passes, not numba's chunk loops
+        parallel.compiled_chunks = lambda n, min_rows=None: None      # the pool's passes, not numba's loops
         try:
             state = stepper.step(state)
             log.clear()

@@ -67,7 +67,7 @@ def test_bits_do_not_depend_on_the_thread_count(name, monkeypatch):
 
 def test_one_particle_per_cell_steps_in_compiled_chunk_loops(monkeypatch):
     """DGMPM with one particle per cell runs its step's chunked passes (faces, cells' corrections,
-    update, law's pass) in numba's compiled chunk loops (`parallel.compiled_chunks`), none on the
+    boundary faces, update, law's pass) in numba's compiled chunk loops (`parallel.compiled_chunks`), none on the
     pool, where numba's threading layer is OpenMP or TBB; the states have the pool's bits."""
     monkeypatch.setattr(parallel, "MIN_ROWS", 16)
     if not parallel._compiled_layer():
