@@ -18,13 +18,13 @@ order of A's rows, as scipy's A.T @ X visits them), so a scatter into rows becom
 the same bits; where A changes every step (MPM's shape functions), `matmul_T` applies A^T
 without storing it, each chunk of output rows scattering into its own rows only.
 
-Compiled chunk loops: DGMPM with one particle per cell runs its Euler step's four chunked passes (faces,
-cells' corrections, update, law's pass) over the same chunks from a numba ``prange``
+Compiled chunk loops: DGMPM with one particle per cell runs its Euler step's chunked passes (faces,
+cells' corrections, boundary faces, update, law's pass) over the same chunks from a numba ``prange``
 (`compiled_chunks`, the loops in `dgmpm_kernels` and `constitutive`, each reaching its kernel
 through `kernel_cache.kernel_call`) where numba's threading layer is OpenMP or TBB: its threads
 take their chunks without the GIL and without waking from the OS, where each worker of the pool
 below wakes and takes the GIL (docs/bench/session20.md). The same chunks and kernels: the same
-bits. All four passes of that step go one way, so that numba's waiting threads, which spin a
+bits. All the passes of that step go one way, so that numba's waiting threads, which spin a
 while, never hold a core that a worker of the pool needs.
 
 The thread count: `set_threads` (the scene key ``run.threads``, ``skdgmpm run --threads``), else
