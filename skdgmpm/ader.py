@@ -31,166 +31,152 @@ import scipy.sparse as sp
 from numba import njit
 from numpy.polynomial import legendre
 
+from skdgmpm.materials.points import only_law, stress_update_point
+
 from . import parallel, system
 from .ader_kernels import interior_flux_sum, traces
 from .dgfem import DGFEM
-from .equations import add_flux
+from .equations import add_flux, embed as _embed_point
 from .kernel_cache import kernel_factory, scratch
 from .riemann import _not_hyperbolic
 from .scheme import stage
 
 
-def _divergence_cells(Q, D, out):
-    """out[r, c] = sum_alpha D[alpha, c] F_alpha(Q[r, c]) for per-cell point values Q (R, nel, n, nc)
-    and derivative matrices D (d, nel, n, n)."""
-    d, n = D.shape[0], Q.shape[2]
-    # literal sizes, the loops unrolled: d always, n for Q1 and Q2 cells in 2D (2 x 2, 3 x 3 points)
-    kernel = _divergence_cells_kernel(d, n if d == 2 and n in (4, 9) else None)
-    parallel.rows(Q.shape[1], lambda lo, hi: kernel(Q, D, out, lo, hi))      # cells lo:hi
-
-
-@kernel_factory
-def _divergence_cells_kernel(d, n):
-    if n is None:                       # n read at run time
-        def divergence_cells(Q, D, out, lo, hi):
-            _divergence_cells_dn(Q, D, out, d, Q.shape[2], lo, hi)
-    else:
-        def divergence_cells(Q, D, out, lo, hi):
-            _divergence_cells_dn(Q, D, out, d, n, lo, hi)
-    return divergence_cells
-
-
-@njit(cache=True, inline="always")
-def _divergence_cells_dn(Q, D, out, d, n, lo, hi):
-    nc = d * d + d
-    s, o = scratch((nc,)), scratch((nc,))
-    for b in range(Q.shape[0]):
-        for c in range(lo, hi):
-            for k in range(n):
-                for v in range(nc):
-                    o[v] = 0.0
-                for a in range(d):          # F_alpha is linear: applied to the weighted sum
-                    for v in range(nc):
-                        s[v] = 0.0
-                    for m in range(n):
-                        w = D[a, c, k, m]
-                        for v in range(nc):
-                            s[v] += w * Q[b, c, m, v]
-                    add_flux(s, a, 1.0, o, d)
-                for v in range(nc):
-                    out[b, c, k, v] = o[v]
-
-
-def _picard_update(U0, T, div, dt, scale, u_hat, new):
-    """One Picard update new[s] = U0[s] - dt sum_r T[s, r] div[r] and the change
-    max |new - u_hat| / scale (nan if any is nan). Flat arrays: div (R, M), new (S, M), U0 and
-    u_hat (S or 1, M) (one row: the same at every node), M = n_points nc; scale (nc,)."""
-    # 2D, S1T1 / S2T2: literal sizes, so the sum over the nodes unrolls and the loop over the points vectorises
-    sizes = (6, len(div)) if len(scale) == 6 and len(div) in (2, 3) else (None, None)
-    kernel = _picard_update_kernel(*sizes)
-    # points lo:hi in parallel; the largest change is the largest of the chunks' (nan if one is)
-    changes = parallel.rows(new.shape[1] // len(scale),
-                            lambda lo, hi: kernel(U0, T, div, dt, scale, u_hat, new, lo, hi))
-    return np.nan if any(c != c for c in changes) else max(changes)
-
-
-@kernel_factory
-def _picard_update_kernel(nc, n_r):
-    if nc is None:                      # sizes read at run time
-        def picard_update(U0, T, div, dt, scale, u_hat, new, lo, hi):
-            return _picard_update_nc(U0, T, div, dt, scale, u_hat, new, len(scale), len(div), lo, hi)
-    else:
-        def picard_update(U0, T, div, dt, scale, u_hat, new, lo, hi):
-            return _picard_update_nc(U0, T, div, dt, scale, u_hat, new, nc, n_r, lo, hi)
-    return picard_update
-
-
-@njit(cache=True, inline="always")
-def _picard_update_nc(U0, T, div, dt, scale, u_hat, new, nc, n_r, lo, hi):
-    big, t = scratch((nc,)), scratch((n_r,))    # max |new - u_hat| per component, nan once one is nan
-    for v in range(nc):
-        big[v] = 0.0
-    for s in range(len(new)):           # indices into the 2D arrays, no row views (reference counted)
-        s_0, s_u = (s if len(U0) > 1 else 0), (s if len(u_hat) > 1 else 0)
-        for r in range(n_r):
-            t[r] = T[s, r]
-        for p in range(lo, hi):         # one pass: the update and its change, no branch
-            for v in range(nc):
-                j = p * nc + v
-                acc = 0.0
-                for r in range(n_r):
-                    acc += t[r] * div[r, j]
-                y = U0[s_0, j] - dt * acc
-                new[s, j] = y
-                x = abs(y - u_hat[s_u, j])
-                big[v] = x if (x > big[v] or x != x) else big[v]
-    change = 0.0
-    for v in range(nc):
-        x = big[v] / scale[v]
-        if x != x:
-            return np.nan
-        change = max(change, x)
-    return change
-
-
-def _picard_step(Q, D, U0, T, dt, scale, u_hat, new):
-    """`_divergence_cells` of Q (R, nel, n, nc) with D (d, nel, n, n), then `_picard_update` from
-    it, in one pass over the cells: each point's divergence at every time node kept in registers,
-    never stored (the same operations, in the same order, for every entry; the change the same
-    max). U0, u_hat, new flat as in `_picard_update`."""
-    d, n, n_r, nc = D.shape[0], Q.shape[2], Q.shape[0], Q.shape[3]
+def _picard_cells(guess, U0, D, T, dt, scale, tol, n_max, law, points, u_hat, q_hat):
+    """The predictor of every cell, each iterated to its own convergence, in one compiled pass: a
+    cell's iterates stay in cache from the guess to the last. ``guess`` = (U, Q, D_taylor, g, S):
+    with g (R,) = dt tau_s the Taylor guess u_hat[s] = U - g[s] DIV F(Q) (+ g[s] S[s] where S
+    (R, nel, n, nc) is not empty) from U and Q = law(U) (nel, n, nc) and the derivative matrices
+    D_taylor (d, nel, n, n); with g empty the constant guess u_hat = U. Then: q = law(u_hat) at
+    every point and node, new = U0 - dt T DIV F(q) (`_divergence_point`), until max |new -
+    u_hat| / scale <= tol over the cell's points, or ``n_max`` iterations; q_hat (R, nel, n, nc)
+    gets the law of the last iterate. U0 flat (R or 1, nel n nc). ``law`` = (laws, params), the law table; ``points`` = (material
+    (nel n,), rho0 (nel n,), history of t_n (nel n, n_history), padding (nel n,) bool: q = 0
+    there). Cells are taken in blocks dealt out in turn to the threads, so that a region that
+    iterates more (an impact's front) is shared among them. Returns (most iterations of a cell,
+    mean iterations per cell, cells not converged)."""
+    laws, params = law
+    n_r, nel, n, nc = u_hat.shape
+    d = D.shape[0]
     literal = d == 2 and n in (4, 9) and n_r in (2, 3)      # 2D S1T1 / S2T2: the loops unrolled
-    kernel = _picard_step_kernel(d, n if literal else None, n_r if literal else None)
-    changes = parallel.rows(Q.shape[1], lambda lo, hi: kernel(Q, D, U0, T, dt, u_hat, new, lo, hi))   # cells lo:hi
-    big = np.array(changes)                                                                           # (chunks, nc)
-    big = np.where(np.isnan(big).any(axis=0), np.nan, big.max(axis=0)) / scale
-    return np.nan if np.isnan(big).any() else float(big.max())
+    kernel = _picard_cells_kernel(d, n if literal else None, n_r if literal else None, only_law(laws))
+    results = parallel.dealt(nel, _PICARD_BLOCK, lambda first, stride: kernel(
+        *guess, U0, D, T, dt, scale, tol, n_max, laws, params, *points, u_hat, q_hat, first, stride, _PICARD_BLOCK))
+    return (max(r[0] for r in results), sum(r[1] for r in results) / max(nel, 1),
+            sum(r[2] for r in results))
+
+
+_PICARD_BLOCK = 64          # cells a thread takes at a time (`parallel.dealt`)
 
 
 @kernel_factory
-def _picard_step_kernel(d, n, n_r):
+def _picard_cells_kernel(d, n, n_r, only):
     if n is None:                       # sizes read at run time
-        def picard_step(Q, D, U0, T, dt, u_hat, new, lo, hi):
-            return _picard_step_n(Q, D, U0, T, dt, u_hat, new, lo, hi, d, Q.shape[2], Q.shape[0])
+        def picard_cells(U, Q, D_g, g, S, U0, D, T, dt, scale, tol, n_max, laws, params, material, rho, h_n, pad,
+                         u_hat, q_hat, first, stride, block):
+            return _picard_cells_n(U, Q, D_g, g, S, U0, D, T, dt, scale, tol, n_max, laws, params, only, material,
+                                   rho, h_n, pad, u_hat, q_hat, first, stride, block, d, u_hat.shape[2],
+                                   u_hat.shape[0])
     else:
-        def picard_step(Q, D, U0, T, dt, u_hat, new, lo, hi):
-            return _picard_step_n(Q, D, U0, T, dt, u_hat, new, lo, hi, d, n, n_r)
-    return picard_step
+        def picard_cells(U, Q, D_g, g, S, U0, D, T, dt, scale, tol, n_max, laws, params, material, rho, h_n, pad,
+                         u_hat, q_hat, first, stride, block):
+            return _picard_cells_n(U, Q, D_g, g, S, U0, D, T, dt, scale, tol, n_max, laws, params, only, material,
+                                   rho, h_n, pad, u_hat, q_hat, first, stride, block, d, n, n_r)
+    return picard_cells
 
 
 @njit(cache=True, inline="always")
-def _picard_step_n(Q, D, U0, T, dt, u_hat, new, lo, hi, d, n, n_r):
-    nc = d * d + d
-    s, o, dv = scratch((nc,)), scratch((nc,)), scratch((n_r, nc))
-    big = np.zeros(nc)                  # max |new - u_hat| per component, nan once one is nan
-    for c in range(lo, hi):
-        for k in range(n):
-            for b in range(n_r):        # `_divergence_cells_dn` at (b, c, k)
-                for v in range(nc):
-                    o[v] = 0.0
-                for a in range(d):
-                    for v in range(nc):
-                        s[v] = 0.0
-                    for m in range(n):
-                        w = D[a, c, k, m]
+def _picard_cells_n(U, Q, D_g, g, S, U0, D, T, dt, scale, tol, n_max, laws, params, only, material, rho, h_n, pad,
+                    u_hat, q_hat, first, stride, block, d, n, n_r):
+    nc, dd = d * d + d, d * d
+    nel, n_h = u_hat.shape[1], h_n.shape[1]
+    s, o, x, big = scratch((nc,)), scratch((nc,)), scratch((nc,)), scratch((nc,))
+    dv, F, P = scratch((n_r, nc)), scratch((3, 3)), scratch((d, d))
+    h_k_n, h_k = scratch((n_h,)), scratch((n_h,))
+    u, new, q = np.empty((n_r, n, nc)), np.empty((n_r, n, nc)), np.empty((n_r, n, nc))     # one cell's
+    most, total, missed = 0, 0, 0
+    for start in range(first * block, nel, stride * block):
+        for c in range(start, min(start + block, nel)):
+            for k in range(n):
+                if len(g):                          # the Taylor guess (L23 eq 64)
+                    _divergence_point(Q, c, D_g, c, k, s, o, d, n)
+                    for t in range(n_r):
                         for v in range(nc):
-                            s[v] += w * Q[b, c, m, v]
-                    add_flux(s, a, 1.0, o, d)
+                            acc = 0.0
+                            acc += g[t] * o[v]
+                            y = U[c, k, v] - 1.0 * acc
+                            u[t, k, v] = y + g[t] * S[t, c, k, v] if len(S) else y
+                else:
+                    for t in range(n_r):
+                        for v in range(nc):
+                            u[t, k, v] = U[c, k, v]
+            change, it = np.nan, 0
+            while it < n_max:
+                it += 1
+                for t in range(n_r):                # the law at every point and node
+                    for k in range(n):
+                        p = c * n + k
+                        for v in range(nc):
+                            x[v] = u[t, k, v]
+                        for v in range(n_h):
+                            h_k_n[v] = h_n[p, v]
+                        _embed_point(x, F, d)
+                        stress_update_point(laws, params, material[p], only, F, h_k_n, h_k, P, d)
+                        for i in range(d):
+                            for a in range(d):
+                                q[t, k, i * d + a] = 0.0 if pad[p] else P[i, a]
+                            q[t, k, dd + i] = 0.0 if pad[p] else x[dd + i] / rho[p]
                 for v in range(nc):
-                    dv[b, v] = o[v]
-            p = c * n + k
-            for t in range(len(new)):   # `_picard_update_nc` at point p
-                t_0, t_u = (t if len(U0) > 1 else 0), (t if len(u_hat) > 1 else 0)
+                    big[v] = 0.0
+                for k in range(n):
+                    for b in range(n_r):
+                        _divergence_point(q, b, D, c, k, s, o, d, n)
+                        for v in range(nc):
+                            dv[b, v] = o[v]
+                    p = c * n + k
+                    for t in range(n_r):            # new = U0 - dt T DIV F(q) at point p
+                        t_0 = t if len(U0) > 1 else 0
+                        for v in range(nc):
+                            acc = 0.0
+                            for r in range(n_r):
+                                acc += T[t, r] * dv[r, v]
+                            y = U0[t_0, p * nc + v] - dt * acc
+                            new[t, k, v] = y
+                            e = abs(y - u[t, k, v])
+                            big[v] = e if (e > big[v] or e != e) else big[v]
+                u, new = new, u
+                change = 0.0
                 for v in range(nc):
-                    j = p * nc + v
-                    acc = 0.0
-                    for r in range(n_r):
-                        acc += T[t, r] * dv[r, v]
-                    y = U0[t_0, j] - dt * acc
-                    new[t, j] = y
-                    x = abs(y - u_hat[t_u, j])
-                    big[v] = x if (x > big[v] or x != x) else big[v]
-    return big
+                    e = big[v] / scale[v]
+                    change = e if (e > change or e != e) else change
+                if change <= tol:
+                    break
+            for t in range(n_r):
+                for k in range(n):
+                    for v in range(nc):
+                        u_hat[t, c, k, v] = u[t, k, v]
+                        q_hat[t, c, k, v] = q[t, k, v]
+            most = max(most, it)
+            total += it
+            missed += 0 if change <= tol else 1
+    return most, total, missed
+
+
+@njit(cache=True, inline="always")
+def _divergence_point(Q, i, D, c, k, s, o, d, n):
+    """o (nc,) = sum_alpha F_alpha(sum_m D[alpha, c, k, m] Q[i, m]) at point k of cell c, with
+    Q[i] (n, nc) the cell's point values (s: scratch (nc,))."""
+    nc = d * d + d
+    for v in range(nc):
+        o[v] = 0.0
+    for a in range(d):                  # F_alpha is linear: applied to the weighted sum
+        for v in range(nc):
+            s[v] = 0.0
+        for m in range(n):
+            w = D[a, c, k, m]
+            for v in range(nc):
+                s[v] += w * Q[i, m, v]
+        add_flux(s, a, 1.0, o, d)
 
 
 def _block_scale(U, dd):
@@ -254,19 +240,28 @@ class PicardStats:
     """Predictor iteration counts over a run."""
 
     steps: int = 0
-    total: int = 0
+    total: int = 0              # the most iterations of a cell, summed over the steps
     max: int = 0
     not_converged: int = 0
+    cell_total: float = 0.0     # the mean iterations per cell, summed over the steps
 
-    def add(self, n, converged):
+    def add(self, n, converged, cell_mean=None):
+        """A step whose cells took at most ``n`` iterations (``cell_mean`` on average), all of
+        them converged or not."""
         self.steps += 1
         self.total += n
         self.max = max(self.max, n)
         self.not_converged += not converged
+        self.cell_total += n if cell_mean is None else cell_mean
 
     @property
     def mean(self):
         return self.total / max(self.steps, 1)
+
+    @property
+    def cell_mean(self):
+        """Mean iterations per cell and step (cells stop at their own convergence)."""
+        return self.cell_total / max(self.steps, 1)
 
 
 def default_picard_max(order, d):
@@ -345,6 +340,19 @@ class ADERDGFEM(DGFEM):
         history = None if not self.materials.n_history else np.tile(self.history_n, (n_rep, 1))
         return self.materials.state(U.reshape(-1, nc), *self._repeated[key], history).reshape(U.shape)
 
+    def _points(self, cells, rho, padding=None):
+        """The predictor's points for `_picard_cells`: (material, density, history of t_n (zero
+        width for hyperelastic laws), padding) at points of the given cells (all but the history
+        made once per cells' array)."""
+        key = ("points", id(cells))
+        if key not in self._repeated:
+            pad = np.zeros(len(cells), dtype=np.bool_) if padding is None else np.ascontiguousarray(padding)
+            self._repeated[key] = (np.ascontiguousarray(self.cell_material[cells], dtype=np.int64),
+                                   np.ascontiguousarray(rho, dtype=float), pad)
+        material, rho, pad = self._repeated[key]
+        history = self.history_n if self.materials.n_history else np.empty((len(cells), 0))
+        return material, rho, np.ascontiguousarray(history, dtype=float), pad
+
     def space_time_source(self, points, time, dt):
         """Source values at ``points`` and the time nodes t_n + tau_s dt: (P+1, n, nc), or None
         without a body force."""
@@ -360,41 +368,34 @@ class ADERDGFEM(DGFEM):
         nel, nq = self.basis.dx.shape
         S = None if source is None else source.reshape(len(self.tau), nel, nq, -1)
         Q = None if Q_points is None else Q_points.reshape(nel, nq, -1)
-        return self._picard(U_points.reshape(nel, nq, -1), dt, self._law, self.D_points, self.D_points, S, Q)
+        return self._picard(U_points.reshape(nel, nq, -1), dt, self._law, self.D_points, self.D_points,
+                            self._points(self.gauss.cell, self.gauss.rho0), S, Q)
 
-    def _picard(self, U, dt, law, D, D_taylor, source=None, Q=None):
+    def _picard(self, U, dt, law, D, D_taylor, points, source=None, Q=None):
         """Picard iterations of L23 eq 62 on per-cell values U (nel, n, nc) at t_n, with the law
-        ``law`` on (..., nel, n, nc) arrays, the predictor's derivative matrices D and those of the
+        ``law`` on (..., nel, n, nc) arrays (the guess's, where Q is not known) and at the points
+        ``points`` (`_picard_cells`), the predictor's derivative matrices D and those of the
         Taylor guess D_taylor (d, nel, n, n), the source (P+1, nel, n, nc) or None, and Q = law(U)
         when the caller knows it. Returns (u_hat, q_hat), (P+1, nel, n, nc): q_hat the law at the
         last iterate before u_hat."""
         U = np.ascontiguousarray(U)
         d, n_t = self.d, len(self.tau)
         scale = _block_scale(U.reshape(-1, U.shape[-1]), d * d)     # change measured per block (F, p)
-        # two buffers, swapped every iteration; two allocations, not one of twice the size: past
-        # glibc's mmap threshold (32 MiB, 256^2 P1) each step mapped it afresh and faulted it in
-        u_hat, new = np.empty((n_t,) + U.shape), np.empty((n_t,) + U.shape)
-        div = np.empty((1,) + U.shape)             # the Taylor guess's (the iterations keep theirs in registers)
-        flat = lambda a: a.reshape(len(a), -1)      # noqa: E731 (views: (S, n_points nc))
+        u_hat, q_hat = np.empty((n_t,) + U.shape), np.empty((n_t,) + U.shape)
+        no_source = np.empty((0, 0, 0, 0))
         if self.picard_guess == "taylor":           # L23 eq 64: u_hat[s] = U - dt tau_s DIV F(Q(U))
             Q = law(U) if Q is None else np.ascontiguousarray(Q)
-            _divergence_cells(Q[None], D_taylor, div[:1])
-            _picard_update(flat(U[None]), (dt * self.tau)[:, None], flat(div[:1]), 1.0, scale, flat(U[None]),
-                           flat(u_hat))
-            if source is not None:          # S at tau_s rather than t_n: only the guess, O(dt^2) apart
-                u_hat += dt * self.tau[:, None, None, None] * source
+            # S at tau_s rather than t_n: only the guess, O(dt^2) apart
+            guess = (U, Q, D_taylor, dt * self.tau, no_source if source is None else np.ascontiguousarray(source))
         else:
-            u_hat[...] = U
+            guess = (U, U, D_taylor, np.empty(0), no_source)
         U0 = U[None] if source is None else U[None] + dt * np.tensordot(self.T_tau, source, axes=1)
-        U0 = flat(np.ascontiguousarray(U0))
-        for it in range(1, self.picard_max + 1):
-            q_hat = None                    # the last iterate's law freed before the next is made
-            q_hat = law(u_hat)
-            change = _picard_step(q_hat, D, U0, self.T_tau, dt, scale, flat(u_hat), flat(new))
-            u_hat, new = new, u_hat
-            if change <= self.picard_tol:
-                break
-        self.picard.add(it, change <= self.picard_tol)
+        U0 = np.ascontiguousarray(U0).reshape(len(U0), -1)
+        # each cell to its own convergence: a cell whose change is within the tolerance is done
+        # (the whole grid iterating on for the cells that are not moved it by about that much)
+        most, mean, missed = _picard_cells(guess, U0, D, self.T_tau, dt, scale, self.picard_tol, self.picard_max,
+                                           self.laws, points, u_hat, q_hat)
+        self.picard.add(most, missed == 0, mean)
         # q_hat: the law of the last iterate, whose fluxes made u_hat (u_hat = U0 - dt T DIV F(q_hat)
         # exactly; law(u_hat) within the tolerance): the corrector integrates the fluxes of the
         # predictor it was given, and no law is evaluated once more at every point and time node

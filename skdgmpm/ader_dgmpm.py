@@ -130,7 +130,8 @@ class ADERDGMPM(ADERDGFEM):
         the padded slots from U on them (nel, n_max, nc) (and the law there, Q_slots, if known);
         ``source`` (P+1, n_particles, nc) from `space_time_source` at the particles, or None."""
         S = None if source is None else np.stack([self._padded(s) for s in source])   # P+1 time nodes
-        return self._picard(U_slots, dt, self._law_cells, self.D_particles, self.grad_at_particles, S, Q_slots)
+        return self._picard(U_slots, dt, self._law_cells, self.D_particles, self.grad_at_particles,
+                            self._points(self.slot_cell, self.slot_rho0, self.mask == 0), S, Q_slots)
 
     def _law_cells(self, U):
         """The law at the particles on padded (..., nel, n_max, nc) arrays (padding stays zero):

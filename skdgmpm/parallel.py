@@ -97,13 +97,27 @@ def chunks(n, min_rows=None):
 def rows(n, call):
     """``call(lo, hi)`` over contiguous chunks of range(n), in parallel; returns the results in
     chunk order (the first chunk's first)."""
-    parts = chunks(n)
+    return _run(call, chunks(n))
+
+
+def dealt(n, block, call):
+    """``call(first, stride)`` for each of the ``stride`` = len(`chunks`(n)) threads, in parallel:
+    the call takes the blocks first, first + stride, ... of ``block`` rows of range(n) (blocks
+    dealt out in turn, so that rows that cost more where they cluster are shared); returns the
+    results in thread order. Each row computed on its own, as in `rows`: the same bits for any
+    thread count."""
+    stride = len(chunks(n))
+    return _run(call, [(first, stride) for first in range(stride)])
+
+
+def _run(call, parts):
+    """``call(*part)`` for every part, the calling thread taking the first, the pool the others."""
     if len(parts) == 1:
-        return [call(0, n)]
+        return [call(*parts[0])]
     global _pool
     if _pool is None:
         _pool = ThreadPoolExecutor(max_workers=threads() - 1, thread_name_prefix="skdgmpm")
-    futures = [_pool.submit(call, lo, hi) for lo, hi in parts[1:]]
+    futures = [_pool.submit(call, *part) for part in parts[1:]]
     first = call(*parts[0])             # the calling thread takes the first chunk itself
     return [first] + [f.result() for f in futures]
 

@@ -96,8 +96,9 @@ class Result:
             out["message"] = self.message
         picard = getattr(st, "picard", None)
         if picard is not None:
+            # per step: the most iterations of a cell (each cell stops at its own convergence)
             out["picard"] = {"mean_iterations": picard.mean, "max_iterations": picard.max,
-                             "not_converged_steps": picard.not_converged}
+                             "mean_cell_iterations": picard.cell_mean, "not_converged_steps": picard.not_converged}
         health = ("min_J", "min_acoustic")
         energy = {k: float(v[-1]) for k, v in self.history.items() if k not in ("step", "t", *health)}
         energy["balance_change"] = float(self.history["balance"][-1] - self.history["balance"][0])

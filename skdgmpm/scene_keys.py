@@ -168,8 +168,9 @@ KEYS = (
         "stop the predictor before it converges, docs/choices.md); the run's summary counts them",
         methods=("ader-dgfem", "ader-dgmpm")),
     Key("method.picard_tol", "", "1e-12", "1e-10",
-        "ADER predictor: stop the Picard iterations when the change is below this fraction of the F and "
-        "p blocks' size (>= 0; 0: always run method.picard_max)", methods=("ader-dgfem", "ader-dgmpm")),
+        "ADER predictor: each cell stops its Picard iterations when its change is below this fraction of "
+        "the F and p blocks' size (>= 0; 0: only once its iterate no longer changes)",
+        methods=("ader-dgfem", "ader-dgmpm")),
     Key("method.limiter", "", '"none"', '"barth-jespersen"',
         "none | barth-jespersen | venkatakrishnan, each also -invariant, -scaled, -invariant-scaled "
         "(L23 eq 41-43; docs/choices.md)", methods=HIGH_ORDER),

@@ -103,6 +103,24 @@ def test_chunks_cover_the_rows_once():
             assert all(hi == lo for (_, hi), (lo, _) in zip(b[:-1], b[1:]))
 
 
+def test_dealt_blocks_cover_the_rows_once_shared_in_turn(monkeypatch):
+    """`parallel.dealt`: thread t takes blocks t, t + T, ...; every row once, for any count."""
+    monkeypatch.setattr(parallel, "MIN_ROWS", 4)
+    try:
+        for threads in (1, 2, 3):
+            parallel.set_threads(threads)
+            for n in (0, 5, 64, 201):
+                taken = parallel.dealt(n, 8, lambda first, stride: [
+                    (row, first) for start in range(first * 8, n, stride * 8)
+                    for row in range(start, min(start + 8, n))])
+                rows = sorted(r for part in taken for r, _ in part)
+                assert rows == list(range(n))
+                if n >= 8 * threads * 2:        # a clustered region (the first blocks) is shared
+                    assert len({t for r, t in (p for part in taken for p in part) if r < 8 * threads}) == threads
+    finally:
+        parallel.set_threads(None)
+
+
 def test_first_bad_is_the_serial_answer(monkeypatch):
     monkeypatch.setattr(parallel, "MIN_ROWS", 4)
     bad = np.zeros(40, bool)
