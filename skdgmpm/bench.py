@@ -253,19 +253,24 @@ class Stepping:
         self.state = self.stepper.step(self.state)
 
 
-def alternate_threads(disc, threads, pairs, warmup):
+def alternate_threads(disc, threads, pairs, warmup, probe_rounds=0):
     """Step the one simulation of ``disc`` (a `build.build` result) on each of the thread counts
     ``threads`` in turn (`alternate`: one step per count a round; any count gives the same bits).
     Returns the CPU and wall times (len(threads), pairs) and the final state; the thread setting
-    is restored."""
+    is restored. With ``probe_rounds``, each round also runs the arithmetic probe's work
+    (`arithmetic_pass`, that many rounds) on each count, among the steps (ABBA): also returns
+    its wall times (len(threads), pairs), what the machine gave the threads in those rounds."""
     from . import parallel
 
-    step = Stepping(disc)
+    step, T = Stepping(disc), len(threads)
+    sides = [step] * T + ([_ArithmeticPass(t, probe_rounds) for t in threads] if probe_rounds else [])
     previous = parallel.set_threads(1)
     try:
-        cpu, wall = alternate([step] * len(threads), pairs, warmup, before=lambda i: _use_threads(threads[i]))
+        cpu, wall = alternate(sides, pairs, warmup, before=lambda i: _use_threads(threads[i % T]))
     finally:
         parallel.set_threads(previous)
+    if probe_rounds:
+        return cpu[:T], wall[:T], step.state, wall[T:]
     return cpu, wall, step.state
 
 
@@ -279,7 +284,7 @@ def measure_threads_here(method, n, threads, steps, warmup):
 
     disc = build(scene_for(method, n))
     pairs = pairs_for(steps)
-    cpu, wall, _ = alternate_threads(disc, threads, pairs, warmup)
+    cpu, wall, _, probe = alternate_threads(disc, threads, pairs, warmup, probe_rounds=PROBE_ROUNDS)
     one = threads.index(1)
     row = {"method": method, "cells": int(disc.stepper.grid.submesh.nelements), "threads": list(threads),
            "pairs": pairs, "warmup": warmup, "order": "ABBA"}
@@ -288,6 +293,11 @@ def measure_threads_here(method, n, threads, steps, warmup):
         row.update({f"{clock}_speedup": speedup,
                     f"{clock}_step_s": {str(t): float(np.median(times[i])) for i, t in enumerate(threads)},
                     f"{clock}_s": {str(t): times[i].tolist() for i, t in enumerate(threads)}})
+    # the machine in the same rounds: the probe's speed-up, and the step's as a fraction of it
+    row["probe_speedup"] = {str(t): ratios(probe[one], probe[i]) for i, t in enumerate(threads) if i != one}
+    row["probe_s"] = {str(t): probe[i].tolist() for i, t in enumerate(threads)}
+    row["share_of_probe"] = {str(t): ratios(wall[one] / wall[i], probe[one] / probe[i])
+                             for i, t in enumerate(threads) if i != one}
     return row
 
 
@@ -330,30 +340,47 @@ ARITHMETIC_ROWS = 16384     # each thread's share of the arithmetic probe: 128 k
 def arithmetic(threads, rounds=200, repeats=5):
     """The speed-up of arithmetic on each thread count: each of t chunks of a pass (`parallel.rows`)
     takes ``rounds`` rounds of exp and sqrt over its own ARITHMETIC_ROWS numbers (in cache; numpy
-    releases the GIL), best of ``repeats``; t times the work per second of one thread. What a
-    pass bound by its arithmetic can gain from more threads now: on a VM whose virtual cores share
-    their host's cores with other guests, less than t (x1.27-1.95 on two threads of this
-    project's VM within an hour, docs/bench/session21.md)."""
+    releases the GIL; `_ArithmeticPass`), best of ``repeats``; t times the work per second of one
+    thread. What a pass bound by its arithmetic can gain from more threads now: on a VM whose
+    virtual cores share their host's cores with other guests, less than t (x1.27-1.95 on two
+    threads of this project's VM within an hour, docs/bench/session21.md)."""
     from . import parallel
-
-    def work(lo, hi):
-        x = np.linspace(0.1, 1.0, ARITHMETIC_ROWS)
-        y = np.empty_like(x)
-        for _ in range(rounds):
-            np.exp(x, out=y)
-            np.sqrt(y, out=y)
 
     previous, times = parallel.set_threads(1), {}
     try:
         for t in threads:
             parallel.set_threads(t)
-            n = t * parallel.MIN_ROWS
-            parallel.rows(n, work)                          # the workers started
-            times[t] = min(_timed(lambda: parallel.rows(n, work)) for _ in range(repeats))
+            work = _ArithmeticPass(t, rounds)
+            work()                                          # the workers started
+            times[t] = min(_timed(work) for _ in range(repeats))
     finally:
         parallel.set_threads(previous)
     base = 1 if 1 in times else threads[0]          # the work per second of one thread, if measured
     return {t: t * times[base] / (base * times[t]) for t in threads}
+
+
+PROBE_ROUNDS = 100          # the arithmetic probe's rounds in each round of a paired scaling (~8 ms)
+
+
+class _ArithmeticPass:
+    """One pass of the arithmetic probe on ``threads`` threads (the count set by the caller): t
+    chunks (`parallel.rows`), each ``rounds`` rounds of exp and sqrt over its own ARITHMETIC_ROWS
+    numbers in cache."""
+
+    def __init__(self, threads, rounds):
+        self.threads, self.rounds = threads, rounds
+
+    def _chunk(self, lo, hi):
+        x = np.linspace(0.1, 1.0, ARITHMETIC_ROWS)
+        y = np.empty_like(x)
+        for _ in range(self.rounds):
+            np.exp(x, out=y)
+            np.sqrt(y, out=y)
+
+    def __call__(self):
+        from . import parallel
+
+        parallel.rows(self.threads * parallel.MIN_ROWS, self._chunk)
 
 
 def format_arithmetic(speedups):
@@ -487,7 +514,12 @@ def format_threads_pair(p):
     parts = ", ".join(f"{t} threads x{s['median']:.2f} (quartiles {s['q25']:.2f}-{s['q75']:.2f}; ratio of the "
                       f"medians {s['medians_ratio']:.2f}: {1e3 * one:.2f} / {1e3 * p['wall_step_s'][t]:.2f} ms "
                       "per step)" for t, s in p["wall_speedup"].items())
-    return f"{head}: {parts}; medians of {p['pairs']} per-round speed-ups, {p['order']} order"
+    line = f"{head}: {parts}; medians of {p['pairs']} per-round speed-ups, {p['order']} order"
+    if "share_of_probe" in p:           # what the machine gave in the same rounds
+        gave = ", ".join(f"{t} threads x{p['probe_speedup'][t]['median']:.2f}, the step {s['median']:.2f} of it "
+                         f"(quartiles {s['q25']:.2f}-{s['q75']:.2f})" for t, s in p["share_of_probe"].items())
+        line += f"; in the same rounds the arithmetic probe gave {gave}"
+    return line
 
 
 def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threads=(1,)):

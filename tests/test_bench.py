@@ -69,6 +69,13 @@ def test_paired_thread_scaling_steps_one_simulation(monkeypatch):
             s = row[f"{clock}_speedup"]["2"]
             assert 0 < s["q25"] <= s["median"] <= s["q75"] < np.inf and 0 < s["medians_ratio"] < np.inf
             assert all(0 < t < np.inf for t in row[f"{clock}_step_s"].values())
+        # the arithmetic probe in the same rounds, and the step's speed-up as a share of its
+        assert set(row["probe_s"]) == {"1", "2"} and all(len(ts) == row["pairs"] for ts in row["probe_s"].values())
+        p, share = row["probe_speedup"]["2"], row["share_of_probe"]["2"]
+        assert p["median"] == np.median(np.array(row["probe_s"]["1"]) / row["probe_s"]["2"])
+        per_round = (np.array(row["wall_s"]["1"]) / row["wall_s"]["2"]) / (np.array(row["probe_s"]["1"]) /
+                                                                            row["probe_s"]["2"])
+        assert share["median"] == np.median(per_round)
         disc = build(bench.scene_for("dgmpm-ctu", 8))
         _, wall, alternated = bench.alternate_threads(disc, [1, 2], 4, warmup=1)
         assert wall.shape == (2, 4)
@@ -113,6 +120,10 @@ def test_paired_scaling_line():
                          "x1.62 (quartiles 1.55-1.70; ratio of the medians 1.61: 152.30 / 94.60 ms per step); "
                          "medians of 30 per-round speed-ups, ABBA order")
     assert bench.format_scaling(rows[:1], [pair]) == pair_line        # the rows failed: still said
+    pair.update(probe_speedup={"2": {"q25": 1.6, "median": 1.7, "q75": 1.8, "medians_ratio": 1.7}},
+                share_of_probe={"2": {"q25": 0.9, "median": 0.954, "q75": 0.99, "medians_ratio": 0.95}})
+    assert bench.format_threads_pair(pair) == pair_line + ("; in the same rounds the arithmetic probe gave 2 threads "
+                                                           "x1.70, the step 0.95 of it (quartiles 0.90-0.99)")
     failed = {"method": "ader-dgmpm-1", "cells": 64, "threads": [1, 2], "error": "boom"}
     assert bench.format_scaling([], [failed]).endswith("alternating thread counts in one process: failed: boom")
 
