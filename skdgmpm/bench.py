@@ -264,9 +264,15 @@ def alternate_threads(disc, threads, pairs, warmup, probe_rounds=0):
 
     step, T = Stepping(disc), len(threads)
     sides = [step] * T + ([_ArithmeticPass(t, probe_rounds) for t in threads] if probe_rounds else [])
+
+    def before(i):
+        _use_threads(threads[i % T])
+        if i >= T:              # numba's threads, spinning after a compiled chunk loop, gone to sleep
+            time.sleep(PROBE_PAUSE_S)
+
     previous = parallel.set_threads(1)
     try:
-        cpu, wall = alternate(sides, pairs, warmup, before=lambda i: _use_threads(threads[i % T]))
+        cpu, wall = alternate(sides, pairs, warmup, before=before)
     finally:
         parallel.set_threads(previous)
     if probe_rounds:
@@ -293,10 +299,12 @@ def measure_threads_here(method, n, threads, steps, warmup):
         row.update({f"{clock}_speedup": speedup,
                     f"{clock}_step_s": {str(t): float(np.median(times[i])) for i, t in enumerate(threads)},
                     f"{clock}_s": {str(t): times[i].tolist() for i, t in enumerate(threads)}})
-    # the machine in the same rounds: the probe's speed-up, and the step's as a fraction of it
-    row["probe_speedup"] = {str(t): ratios(probe[one], probe[i]) for i, t in enumerate(threads) if i != one}
+    # the machine in the same rounds: the probe's speed-up (t threads do t times the work), and
+    # the step's as a fraction of it
+    work = probe / np.asarray(threads, dtype=float)[:, None]            # seconds per thread's share
+    row["probe_speedup"] = {str(t): ratios(work[one], work[i]) for i, t in enumerate(threads) if i != one}
     row["probe_s"] = {str(t): probe[i].tolist() for i, t in enumerate(threads)}
-    row["share_of_probe"] = {str(t): ratios(wall[one] / wall[i], probe[one] / probe[i])
+    row["share_of_probe"] = {str(t): ratios(wall[one] / wall[i], work[one] / work[i])
                              for i, t in enumerate(threads) if i != one}
     return row
 
@@ -360,6 +368,7 @@ def arithmetic(threads, rounds=200, repeats=5):
 
 
 PROBE_ROUNDS = 100          # the arithmetic probe's rounds in each round of a paired scaling (~8 ms)
+PROBE_PAUSE_S = 0.02        # untimed, before each: OpenMP's idle threads spin some milliseconds
 
 
 class _ArithmeticPass:
