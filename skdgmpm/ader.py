@@ -66,7 +66,9 @@ def _picard_cells(guess, U0, D, T, dt, scale, tol, n_max, law, points, u_hat, q_
             sum(r[2] for r in results))
 
 
-_PICARD_BLOCK = 64          # cells a thread takes at a time (`parallel.dealt`)
+# cells a thread takes at a time (`parallel.dealt`): a prime, so that a grid's rows (often 2^k
+# cells) do not put the same columns, e.g. those next to an impacted face, on the same thread
+_PICARD_BLOCK = 61
 
 
 @kernel_factory
