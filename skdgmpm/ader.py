@@ -31,18 +31,19 @@ import scipy.sparse as sp
 from numba import njit
 from numpy.polynomial import legendre
 
-from skdgmpm.materials.points import only_law, stress_update_point
+from skdgmpm.materials.points import only_law
 
 from . import parallel, system
 from .ader_kernels import interior_flux_sum, traces
+from .constitutive import law_point
 from .dgfem import DGFEM
-from .equations import add_flux, embed as _embed_point
+from .equations import add_flux
 from .kernel_cache import kernel_factory, scratch
 from .riemann import _not_hyperbolic
 from .scheme import stage
 
 
-def _picard_cells(guess, U0, D, T, dt, scale, tol, n_max, law, points, u_hat, q_hat):
+def _picard_cells(guess, U0, D, T, dt, scale, tol, n_max, law, points, out):
     """The predictor of every cell, each iterated to its own convergence, in one compiled pass: a
     cell's iterates stay in cache from the guess to the last. ``guess`` = (U, Q, D_taylor, g, S):
     with g (R,) = dt tau_s the Taylor guess u_hat[s] = U - g[s] DIV F(Q) (+ g[s] S[s] where S
@@ -50,18 +51,21 @@ def _picard_cells(guess, U0, D, T, dt, scale, tol, n_max, law, points, u_hat, q_
     D_taylor (d, nel, n, n); with g empty the constant guess u_hat = U. Then: q = law(u_hat) at
     every point and node, new = U0 - dt T DIV F(q) (`_divergence_point`), until max |new -
     u_hat| / scale <= tol over the cell's points, or ``n_max`` iterations; q_hat (R, nel, n, nc)
-    gets the law of the last iterate. U0 flat (R or 1, nel n nc). ``law`` = (laws, params), the law table; ``points`` = (material
-    (nel n,), rho0 (nel n,), history of t_n (nel n, n_history), padding (nel n,) bool: q = 0
-    there). Cells are taken in blocks dealt out in turn to the threads, so that a region that
-    iterates more (an impact's front) is shared among them. Returns (most iterations of a cell,
-    mean iterations per cell, cells not converged)."""
+    gets the law of the last iterate (`constitutive.law_point`), and q_sum (nel, n, nc) its sum
+    over the nodes with the weights w (R,), for the corrector's volume term: ``out`` = (u_hat,
+    q_hat, w, q_sum). U0 flat (R or 1, nel n nc).
+    ``law`` = (laws, params), the law table; ``points`` = (material (nel n,), rho0 (nel n,),
+    history of t_n (nel n, n_history), padding (nel n,) bool: q = 0 there). Cells are taken in
+    blocks dealt out in turn to the threads, so that a region that iterates more (an impact's
+    front) is shared among them. Returns (most iterations of a cell, mean iterations per cell,
+    cells not converged)."""
     laws, params = law
-    n_r, nel, n, nc = u_hat.shape
+    n_r, nel, n, nc = out[0].shape
     d = D.shape[0]
     literal = d == 2 and n in (4, 9) and n_r in (2, 3)      # 2D S1T1 / S2T2: the loops unrolled
     kernel = _picard_cells_kernel(d, n if literal else None, n_r if literal else None, only_law(laws))
     results = parallel.dealt(nel, _PICARD_BLOCK, lambda first, stride: kernel(
-        *guess, U0, D, T, dt, scale, tol, n_max, laws, params, *points, u_hat, q_hat, first, stride, _PICARD_BLOCK))
+        *guess, U0, D, T, dt, scale, tol, n_max, laws, params, *points, *out, first, stride, _PICARD_BLOCK))
     return (max(r[0] for r in results), sum(r[1] for r in results) / max(nel, 1),
             sum(r[2] for r in results))
 
@@ -75,24 +79,24 @@ _PICARD_BLOCK = 61
 def _picard_cells_kernel(d, n, n_r, only):
     if n is None:                       # sizes read at run time
         def picard_cells(U, Q, D_g, g, S, U0, D, T, dt, scale, tol, n_max, laws, params, material, rho, h_n, pad,
-                         u_hat, q_hat, first, stride, block):
+                         u_hat, q_hat, w, q_sum, first, stride, block):
             return _picard_cells_n(U, Q, D_g, g, S, U0, D, T, dt, scale, tol, n_max, laws, params, only, material,
-                                   rho, h_n, pad, u_hat, q_hat, first, stride, block, d, u_hat.shape[2],
+                                   rho, h_n, pad, u_hat, q_hat, w, q_sum, first, stride, block, d, u_hat.shape[2],
                                    u_hat.shape[0])
     else:
         def picard_cells(U, Q, D_g, g, S, U0, D, T, dt, scale, tol, n_max, laws, params, material, rho, h_n, pad,
-                         u_hat, q_hat, first, stride, block):
+                         u_hat, q_hat, w, q_sum, first, stride, block):
             return _picard_cells_n(U, Q, D_g, g, S, U0, D, T, dt, scale, tol, n_max, laws, params, only, material,
-                                   rho, h_n, pad, u_hat, q_hat, first, stride, block, d, n, n_r)
+                                   rho, h_n, pad, u_hat, q_hat, w, q_sum, first, stride, block, d, n, n_r)
     return picard_cells
 
 
 @njit(cache=True, inline="always")
 def _picard_cells_n(U, Q, D_g, g, S, U0, D, T, dt, scale, tol, n_max, laws, params, only, material, rho, h_n, pad,
-                    u_hat, q_hat, first, stride, block, d, n, n_r):
-    nc, dd = d * d + d, d * d
+                    u_hat, q_hat, w, q_sum, first, stride, block, d, n, n_r):
+    nc = d * d + d
     nel, n_h = u_hat.shape[1], h_n.shape[1]
-    s, o, x, big = scratch((nc,)), scratch((nc,)), scratch((nc,)), scratch((nc,))
+    s, o, x, row, big = scratch((nc,)), scratch((nc,)), scratch((nc,)), scratch((nc,)), scratch((nc,))
     dv, F, P = scratch((n_r, nc)), scratch((3, 3)), scratch((d, d))
     h_k_n, h_k = scratch((n_h,)), scratch((n_h,))
     u, new, q = np.empty((n_r, n, nc)), np.empty((n_r, n, nc)), np.empty((n_r, n, nc))     # one cell's
@@ -122,12 +126,9 @@ def _picard_cells_n(U, Q, D_g, g, S, U0, D, T, dt, scale, tol, n_max, laws, para
                             x[v] = u[t, k, v]
                         for v in range(n_h):
                             h_k_n[v] = h_n[p, v]
-                        _embed_point(x, F, d)
-                        stress_update_point(laws, params, material[p], only, F, h_k_n, h_k, P, d)
-                        for i in range(d):
-                            for a in range(d):
-                                q[t, k, i * d + a] = 0.0 if pad[p] else P[i, a]
-                            q[t, k, dd + i] = 0.0 if pad[p] else x[dd + i] / rho[p]
+                        law_point(laws, params, material[p], only, x, h_k_n, h_k, rho[p], F, P, row, d)
+                        for v in range(nc):
+                            q[t, k, v] = 0.0 if pad[p] else row[v]
                 for v in range(nc):
                     big[v] = 0.0
                 for k in range(n):
@@ -158,6 +159,12 @@ def _picard_cells_n(U, Q, D_g, g, S, U0, D, T, dt, scale, tol, n_max, laws, para
                     for v in range(nc):
                         u_hat[t, c, k, v] = u[t, k, v]
                         q_hat[t, c, k, v] = q[t, k, v]
+            for k in range(n):                      # sum_s w_s q_hat[s], in the order of `_time_sum`
+                for v in range(nc):
+                    acc = w[0] * q[0, k, v]
+                    for t in range(1, n_r):
+                        acc += w[t] * q[t, k, v]
+                    q_sum[c, k, v] = acc
             most = max(most, it)
             total += it
             missed += 0 if change <= tol else 1
@@ -247,14 +254,14 @@ class PicardStats:
     not_converged: int = 0
     cell_total: float = 0.0     # the mean iterations per cell, summed over the steps
 
-    def add(self, n, converged, cell_mean=None):
+    def add(self, n, converged, cell_mean):
         """A step whose cells took at most ``n`` iterations (``cell_mean`` on average), all of
         them converged or not."""
         self.steps += 1
         self.total += n
         self.max = max(self.max, n)
         self.not_converged += not converged
-        self.cell_total += n if cell_mean is None else cell_mean
+        self.cell_total += cell_mean
 
     @property
     def mean(self):
@@ -377,9 +384,10 @@ class ADERDGFEM(DGFEM):
 
     @stage
     def predictor(self, U_points, dt, source=None, Q_points=None):
-        """Space-time predictor: (u_hat, q_hat) of shape (P+1, nel, nq, nc) and the iterations;
-        ``source`` (P+1, n_points, nc) from `space_time_source` at the Gauss points; ``Q_points``
-        the law at U_points when known (the state's Q)."""
+        """Space-time predictor: (u_hat, q_hat) of shape (P+1, nel, nq, nc) and q_sum (nel, nq, nc),
+        the time nodes' weighted sum of q_hat (`_picard`); ``source`` (P+1, n_points, nc) from
+        `space_time_source` at the Gauss points; ``Q_points`` the law at U_points when known (the
+        state's Q)."""
         nel, nq = self.basis.dx.shape
         S = None if source is None else source.reshape(len(self.tau), nel, nq, -1)
         Q = None if Q_points is None else Q_points.reshape(nel, nq, -1)
@@ -391,12 +399,12 @@ class ADERDGFEM(DGFEM):
         ``law`` on (..., nel, n, nc) arrays (the guess's, where Q is not known) and at the points
         ``points`` (`_picard_cells`), the predictor's derivative matrices D and those of the
         Taylor guess D_taylor (d, nel, n, n), the source (P+1, nel, n, nc) or None, and Q = law(U)
-        when the caller knows it. Returns (u_hat, q_hat), (P+1, nel, n, nc): q_hat the law at the
-        last iterate before u_hat."""
+        when the caller knows it. Returns (u_hat, q_hat, q_sum): u_hat and q_hat (P+1, nel, n, nc),
+        q_hat the law at the last iterate before u_hat, and q_sum (nel, n, nc) = sum_s w_s q_hat[s]."""
         U = np.ascontiguousarray(U)
         d, n_t = self.d, len(self.tau)
         scale = _block_scale(U.reshape(-1, U.shape[-1]), d * d)     # change measured per block (F, p)
-        u_hat, q_hat = np.empty((n_t,) + U.shape), np.empty((n_t,) + U.shape)
+        u_hat, q_hat, q_sum = np.empty((n_t,) + U.shape), np.empty((n_t,) + U.shape), np.empty(U.shape)
         no_source = np.empty((0, 0, 0, 0))
         if self.picard_guess == "taylor":           # L23 eq 64: u_hat[s] = U - dt tau_s DIV F(Q(U))
             Q = law(U) if Q is None else np.ascontiguousarray(Q)
@@ -409,24 +417,25 @@ class ADERDGFEM(DGFEM):
         # each cell to its own convergence: a cell whose change is within the tolerance is done
         # (the whole grid iterating on for the cells that are not moved it by about that much)
         most, mean, missed = _picard_cells(guess, U0, D, self.T_tau, dt, scale, self.picard_tol, self.picard_max,
-                                           self.laws, points, u_hat, q_hat)
+                                           self.laws, points, (u_hat, q_hat, self.w_tau, q_sum))
         self.picard.add(most, missed == 0, mean)
         # q_hat: the law of the last iterate, whose fluxes made u_hat (u_hat = U0 - dt T DIV F(q_hat)
         # exactly; law(u_hat) within the tolerance): the corrector integrates the fluxes of the
         # predictor it was given, and no law is evaluated once more at every point and time node
-        return u_hat, q_hat
+        return u_hat, q_hat, q_sum
 
     # ---------------------------------------------------------------- corrector
     @stage
-    def corrector(self, dofs, u_hat, q_hat, time, dt, source=None):
+    def corrector(self, dofs, u_hat, q_hat, q_sum, time, dt, source=None):
         """u^{n+1} = u^n + dt M^-1 sum_s w_s (R(q_hat(tau_s)) + int Phi S(tau_s)) (L23 eq 28-33);
-        returns it and the boundary work. u_hat, q_hat: (P+1, ..., nc) at the predictor's points;
+        returns it and the boundary work. u_hat, q_hat: (P+1, ..., nc) at the predictor's points,
+        q_sum (..., nc) = sum_s w_s q_hat[s] (the predictor's);
         ``source``: (P+1, n_gauss, nc) at the Gauss points, or None. The volume and source terms
         and the surface integral are linear in Q, so the time nodes are summed before them; the
         face states (tangent, Riemann problem) are taken at every node."""
         n_t, nc = len(self.tau), dofs.shape[1]
         u_hat, q_hat = u_hat.reshape(n_t, -1, nc), q_hat.reshape(n_t, -1, nc)
-        R = system.volume_flux(_time_sum(self.w_tau, q_hat), self.K, np.zeros_like(dofs))
+        R = system.volume_flux(q_sum.reshape(-1, nc), self.K, np.zeros_like(dofs))
         work = self.surface_integral(u_hat, q_hat, time, dt, R)
         if source is not None:
             R += self.source_integral(_time_sum(self.w_tau, source))
@@ -460,16 +469,18 @@ class ADERDGFEM(DGFEM):
         return work
 
     @stage
-    def advance(self, U, time, dt, Q_points=None):
+    def advance(self, U, time, dt, Q_points=None, U_points=None):
+        """The predictor from the dofs U (their values U_points at the Gauss points, and the law
+        there Q_points, where known), then the corrector: the new dofs and the boundary work."""
         S = self.space_time_source(self.gauss, time, dt)       # predictor and corrector share it
-        u_hat, q_hat = self.predictor(parallel.matmul(self.B, U), dt, S, Q_points)
-        return self.corrector(U, u_hat, q_hat, time, dt, S)
+        U_points = parallel.matmul(self.B, U) if U_points is None else U_points
+        return self.corrector(U, *self.predictor(U_points, dt, S, Q_points), time, dt, S)
 
     def step(self, state, dt_max=np.inf):
         self.history_n = state.history          # the predictor's law reads the history of t_n
 
-        def attempt(dt):            # the state's Q is the law at the Gauss points at t_n
-            dofs, work = self.advance(state.dofs, state.t, dt, state.Q)
+        def attempt(dt):            # the state's U and Q: B dofs and the law at the Gauss points at t_n
+            dofs, work = self.advance(state.dofs, state.t, dt, state.Q, state.U)
             return self.evaluate_points(state, dofs, dt), work
 
         return self.step_with_cfl_guard(state, dt_max, attempt)

@@ -8,12 +8,22 @@ from numba import njit, prange
 from skdgmpm.materials.points import law_table, only_law, stress_tangent_point, stress_update_point, tangent_call
 
 from .dgmpm_kernels import record_width, write_record
-from .equations import embed as _embed_point
+from .equations import embed as _embed_point, flux_state
 from .health import Health, health_point, identity_if_not, summarise, tally
 from .parallel import row_product
 from . import parallel
 from .kernel_cache import kernel_call, kernel_factory, scratch
 from .system import DIMENSION, embed
+
+
+@njit(cache=True, inline="always")
+def law_point(laws, params, m, only, u, h_n, h, rho, F, P, q, d):
+    """q = [P, v] at the state row u = [F, p] of a point of material m and density rho: its law's
+    stress at F embedded in 3D (`points.stress_update_point`, the history h_n of t_n updated into
+    h), v = p / rho (F, P: scratch (3, 3), (d, d))."""
+    _embed_point(u, F, d)
+    stress_update_point(laws, params, m, only, F, h_n, h, P, d)
+    flux_state(P, u, rho, q, d)
 
 
 @kernel_factory
@@ -50,21 +60,19 @@ def _states(d, assess, gathered, slots, split, only):  # literals: the loops unr
                     u[c] = U[k, c]
             for c in range(n_h):
                 h_k_n[c] = h_n[k, c]
-            _embed_point(u, F, d)
             m = index[k]
             if assess and d > 1:            # the tangent beside the stress (1D: called apart, below)
+                _embed_point(u, F, d)
                 stress_tangent_point(laws, params, m, only, F, h_k_n, h_k, P, C, d)
+                flux_state(P, u, rho[k], q, d)
             else:
-                stress_update_point(laws, params, m, only, F, h_k_n, h_k, P, d)
+                law_point(laws, params, m, only, u, h_k_n, h_k, rho[k], F, P, q, d)
             for c in range(n_h):
                 h[k, c] = h_k[c]
             ok = True
-            for i in range(d):
-                for a in range(d):
-                    Q[k, i * d + a] = P[i, a]
-                    ok = ok and np.isfinite(P[i, a])
-                Q[k, dd + i] = u[dd + i] / rho[k]
-                ok = ok and np.isfinite(Q[k, dd + i])
+            for c in range(nc):
+                Q[k, c] = q[c]
+                ok = ok and np.isfinite(q[c])
             if assess:
                 for c in range(nc):
                     ok = ok and np.isfinite(u[c])
@@ -80,8 +88,6 @@ def _states(d, assess, gathered, slots, split, only):  # literals: the loops unr
                     x_new[k, i] = x[k, i] + half_dt * (v_old[k, i] + Q[k, dd + i])
                 if slots:
                     rec, row, normals, rec_state = records
-                    for j in range(nc):
-                        q[j] = Q[k, j]
                     write_record(q, rho[k], C, normals, row[k], rec, rec_state, n_c, r, d, slots, split)
         return first, J_min, omega_min
     return states

@@ -42,6 +42,15 @@ def embed(u, F, d):
 
 
 @njit(cache=True, inline="always")
+def flux_state(P, u, rho, q, d):
+    """q = [P, v] from the stress P (d, d) and the state row u = [F, p]: v = p / rho0."""
+    for i in range(d):
+        for a in range(d):
+            q[i * d + a] = P[i, a]
+        q[d * d + i] = u[d * d + i] / rho
+
+
+@njit(cache=True, inline="always")
 def traction(q, n, t, d):
     """t = P n of the state row q = [P, v]."""
     for i in range(d):

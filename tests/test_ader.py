@@ -104,11 +104,13 @@ def test_each_cell_iterates_to_its_own_convergence():
     ref, q_ref = _reference_predictor(st, U, state.Q, dt, st.picard_max)
     scale = np.abs(ref).max(axis=(0, 1, 2))
     st.picard_tol = 0.0
-    u0, q0 = st.predictor(U, dt, None, state.Q)
+    u0, q0, q_sum = st.predictor(U, dt, None, state.Q)
     assert np.max(np.abs(u0 - ref) / scale) < 1e-13
+    w = st.w_tau        # the corrector's volume term: the nodes' weighted sum, in node order
+    assert np.array_equal(q_sum, sum((w[s] * q0[s] for s in range(1, len(w))), w[0] * q0[0]))
     assert np.max(np.abs(q0 - q_ref) / np.abs(q_ref).max(axis=(0, 1, 2))) < 1e-12
     st.picard_tol, st.picard = 1e-12, type(st.picard)()
-    u, _ = st.predictor(U, dt, None, state.Q)
+    u, _, _ = st.predictor(U, dt, None, state.Q)
     assert st.picard.max == st.picard_max and 1.0 <= st.picard.cell_mean < 0.5 * st.picard_max
     assert 0.0 < np.max(np.abs(u - u0) / scale) < 1e-10
 
