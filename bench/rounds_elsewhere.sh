@@ -2,7 +2,9 @@
 # The bench's paired thread scaling, several rounds back to back, on a machine where the package is
 # not installed (e.g. a lent machine with numpy, scipy and numba but no network): run from the
 # repository root, with scikit-fem's and meshio's wheels in $WHEELS. Each round's JSON and the
-# printout go to $OUT. docs/bench/session23.md was measured so.
+# printout go to $OUT, a JSON per round, so that a run cut short keeps its finished rounds (where a run
+# is not cut short, `skdgmpm bench --repeat N` does the same in one call). docs/bench/session23.md
+# was measured so.
 #
 #   WHEELS=.whl OUT=/tmp/out METHODS=dgmpm-ctu,ader-dgfem-1 THREADS=1,2 ROUNDS=3 bash bench/rounds_elsewhere.sh
 set -u

@@ -500,7 +500,9 @@ def format_scaling(rows, threads_paired=()):
     for r in rows:
         if "error" not in r:
             groups.setdefault((r["method"], r["cells"]), {})[r["threads"]] = r["step_s"]
-    pairs = {(p["method"], p["cells"]): p for p in threads_paired}
+    pairs = {}
+    for p in threads_paired:
+        pairs.setdefault((p["method"], p["cells"]), []).append(p)
     lines = []
     for (method, cells), times in groups.items():
         if len(times) < 2 or 1 not in times:
@@ -509,14 +511,30 @@ def format_scaling(rows, threads_paired=()):
                           for n, t in sorted(times.items()))
         lines.append(f"{method} {cells} cells: {parts}")
         if (method, cells) in pairs:
-            lines.append(format_threads_pair(pairs.pop((method, cells))))
-    return "\n".join([*lines, *map(format_threads_pair, pairs.values())])     # rows failed: still said
+            lines.extend(format_threads_pairs(pairs.pop((method, cells))))
+    return "\n".join([*lines, *(line for p in pairs.values() for line in format_threads_pairs(p))])  # rows failed
+
+
+def format_threads_pairs(repeats):
+    """The lines of the paired scaling rows of one (method, cells): one per repeat, then, with
+    several, each count's median speed-up repeat by repeat and the lowest of them."""
+    lines = [format_threads_pair(p) for p in repeats]
+    done = [p for p in repeats if "error" not in p]
+    if len(repeats) > 1 and done:
+        counts = ", ".join(f"{t} threads " + " ".join(f"x{p['wall_speedup'][t]['median']:.2f}" for p in done)
+                           + f" (lowest x{min(p['wall_speedup'][t]['median'] for p in done):.2f})"
+                           for t in done[0]["wall_speedup"])
+        lines.append(f"{done[0]['method']} {done[0]['cells']} cells, paired, {len(done)} of {len(repeats)} repeats: "
+                     f"{counts}")
+    return lines
 
 
 def format_threads_pair(p):
     """One line of a paired scaling row: per count t > 1, the median per-round wall-time speed-up
     over one thread, its quartiles, the ratio of the medians."""
     head = f"{p['method']} {p['cells']} cells, paired, alternating thread counts in one process"
+    if "repeat" in p:
+        head += f" (repeat {p['repeat']})"
     if "error" in p:
         return f"{head}: failed: {p['error']}"
     one = p["wall_step_s"]["1"]
@@ -531,11 +549,12 @@ def format_threads_pair(p):
     return line
 
 
-def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threads=(1,)):
+def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threads=(1,), repeat=1):
     """Run every (method, size, thread count), then at each size every requested peer method whose
     counterpart is requested too, paired (`measure_pair`; not without the peer), and, with several
     thread counts (1 among them), every method but the peer's on them all in one process
-    (`measure_threads`); write JSON if asked. Returns the rows, the paired rows, the paired scaling
+    (`measure_threads`), ``repeat`` times in turn (each paired scaling row then has its ``repeat``,
+    1 to ``repeat``: a speed-up is judged by each one, not by their best); write JSON if asked. Returns the rows, the paired rows, the paired scaling
     rows and the machine's probes: with several thread counts, the memory bandwidth on each
     (`memory_bandwidth`), the speed-up of arithmetic (`arithmetic`) and an empty pass's cost
     (`handoff`), {"memory": {t: GB/s}, "arithmetic": {t: x}, "handoff": {t: s}} (empty dicts with
@@ -549,7 +568,8 @@ def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threa
     # every method: 2 x pairs steps each, ~10 s for the slowest (ADER) at 256^2; the peer is serial
     scaled = [m for m in methods if m not in peer.METHODS] if len(threads) > 1 and 1 in threads else []
     rows, paired, threads_paired = [], [], []
-    bar = progress_bar(progress, len(sizes) * (len(methods) * len(threads) + len(pairs) + len(scaled)), unit="run")
+    bar = progress_bar(progress, len(sizes) * (len(methods) * len(threads) + len(pairs) + repeat * len(scaled)),
+                       unit="run")
     for n in sizes:                     # methods interleaved at each size (a peer beside ours)
         for method in methods:
             for t in threads:
@@ -563,10 +583,13 @@ def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threa
             bar.set_description(f"{peer.COUNTERPART[method]}/{method} {n}x{n} paired")
             paired.append(measure_pair(method, n, steps, warmup))
             bar.update()
-        for method in scaled:
-            bar.set_description(f"{method} {n}x{n} threads {','.join(map(str, threads))} paired")
-            threads_paired.append(measure_threads(method, n, threads, steps, warmup))
-            bar.update()
+        for k in range(1, repeat + 1):      # the methods in turn, then again: each repeat sees the same hour
+            for method in scaled:
+                bar.set_description(f"{method} {n}x{n} threads {','.join(map(str, threads))} paired"
+                                    + (f", {k} of {repeat}" if repeat > 1 else ""))
+                row = measure_threads(method, n, threads, steps, warmup)
+                threads_paired.append({**row, "repeat": k} if repeat > 1 else row)
+                bar.update()
     bar.close()
     probes = {"memory": memory_bandwidth(threads) if len(threads) > 1 else {},
               "arithmetic": arithmetic(threads) if len(threads) > 1 else {},

@@ -169,3 +169,40 @@ def test_handoff_probe_splits_an_empty_pass_over_each_count(monkeypatch):
     assert set(costs) == {1, 2, 3} and all(c > 0 for c in costs.values()) and seen == [1, 1, 2, 2, 3, 3]
     line = bench.format_handoff(costs)
     assert "1 thread " in line and "2 threads " in line and "3 threads " in line and bench.format_handoff({1: 1e-6}) == ""
+
+
+def test_repeated_paired_scaling_lines():
+    """Pure formatting, fabricated numbers: with --repeat, one paired line per repeat, then each
+    count's median speed-up repeat by repeat and the lowest; a failed repeat is said and left out."""
+    def pair(k, median):
+        return {"method": "dgmpm-ctu", "cells": 65536, "threads": [1, 2], "pairs": 30, "order": "ABBA", "repeat": k,
+                "wall_speedup": {"2": {"q25": 1.5, "median": median, "q75": 1.9, "medians_ratio": median}},
+                "wall_step_s": {"1": 0.012, "2": 0.012 / median}}
+    failed = {"method": "dgmpm-ctu", "cells": 65536, "threads": [1, 2], "error": "boom", "repeat": 3}
+    lines = bench.format_scaling([], [pair(1, 1.804), pair(2, 1.61), failed]).splitlines()
+    assert len(lines) == 4
+    assert lines[0].startswith("dgmpm-ctu 65536 cells, paired, alternating thread counts in one process (repeat 1): "
+                               "2 threads x1.80")
+    assert lines[1].startswith("dgmpm-ctu 65536 cells, paired, alternating thread counts in one process (repeat 2): "
+                               "2 threads x1.61")
+    assert lines[2].endswith("(repeat 3): failed: boom")
+    assert lines[3] == "dgmpm-ctu 65536 cells, paired, 2 of 3 repeats: 2 threads x1.80 x1.61 (lowest x1.61)"
+
+
+def test_bench_repeats_the_paired_scaling(tmp_path, capsys):
+    path = tmp_path / "bench.json"
+    assert main(["bench", "--sizes", "8", "--methods", "dgmpm-dcu", "--steps", "1", "--warmup", "1",
+                 "--threads", "1,2", "--repeat", "2", "--json", str(path), "--quiet"]) == 0
+    text = capsys.readouterr().out
+    data = json.load(open(path))
+    assert [(p["method"], p["repeat"]) for p in data["threads_paired"]] == [("dgmpm-dcu", 1), ("dgmpm-dcu", 2)]
+    assert all("error" not in p and p["pairs"] == bench.PAIRS for p in data["threads_paired"])
+    assert "(repeat 2): 2 threads x" in text and "dgmpm-dcu 64 cells, paired, 2 of 2 repeats: 2 threads x" in text
+
+
+@pytest.mark.parametrize("value, says", [("0", "'0': must be at least 1"), ("two", "'two' is not a whole number")])
+def test_bench_repeat_must_be_a_positive_whole_number(value, says, capsys):
+    with pytest.raises(SystemExit) as stop:
+        main(["bench", "--repeat", value])
+    assert stop.value.code == 2
+    assert capsys.readouterr().err.strip().splitlines()[-1] == f"skdgmpm bench: error: argument --repeat: {says}"
