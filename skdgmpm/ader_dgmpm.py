@@ -128,7 +128,8 @@ class ADERDGMPM(ADERDGFEM):
     def predictor(self, U_slots, dt, source=None, Q_slots=None):
         """Space-time predictor with dofs at the particles: (u_hat, q_hat) (P+1, nel, n_max, nc) and
         the time nodes' weighted sum q_sum (nel, n_max, nc) on the padded slots, from U on them
-        (nel, n_max, nc) (and the law there, Q_slots, if known); ``source`` (P+1, n_particles, nc) from `space_time_source` at the particles, or None."""
+        (nel, n_max, nc) (and the law there, Q_slots, if known); ``source`` (P+1, n_particles, nc)
+        from `space_time_source` at the particles, or None."""
         S = None if source is None else np.stack([self._padded(s) for s in source])   # P+1 time nodes
         return self._picard(U_slots, dt, self._law_cells, self.D_particles, self.grad_at_particles,
                             self._points(self.slot_cell, self.slot_rho0, self.mask == 0), S, Q_slots)
@@ -164,7 +165,8 @@ class ADERDGMPM(ADERDGFEM):
 
         def attempt(dt):
             predicted = self.predictor(U_slots, dt, self.space_time_source(self.particles, state.t, dt), Q_slots)
-            dofs, work = self.corrector(dofs_n, *predicted, state.t, dt, self.space_time_source(self.gauss, state.t, dt))
+            dofs, work = self.corrector(dofs_n, *predicted, state.t, dt,
+                                        self.space_time_source(self.gauss, state.t, dt))
             return self.constitutive_update(state, self.back_map(state, dofs, dofs_n), dt), work
 
         return self.step_with_cfl_guard(state, dt_max, attempt)

@@ -554,12 +554,12 @@ def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threa
     counterpart is requested too, paired (`measure_pair`; not without the peer), and, with several
     thread counts (1 among them), every method but the peer's on them all in one process
     (`measure_threads`), ``repeat`` times in turn (each paired scaling row then has its ``repeat``,
-    1 to ``repeat``: a speed-up is judged by each one, not by their best); write JSON if asked. Returns the rows, the paired rows, the paired scaling
-    rows and the machine's probes: with several thread counts, the memory bandwidth on each
-    (`memory_bandwidth`), the speed-up of arithmetic (`arithmetic`) and an empty pass's cost
-    (`handoff`), {"memory": {t: GB/s}, "arithmetic": {t: x}, "handoff": {t: s}} (empty dicts with
-    one count). The CPU time per cell of a one-thread row is the cost per
-    core."""
+    1 to ``repeat``: a speed-up is judged by each one, not by their best); write JSON if asked.
+    Returns the rows, the paired rows, the paired scaling rows and the machine's probes: with
+    several thread counts, the memory bandwidth on each (`memory_bandwidth`), the speed-up of
+    arithmetic (`arithmetic`) and an empty pass's cost (`handoff`), {"memory": {t: GB/s},
+    "arithmetic": {t: x}, "handoff": {t: s}} (empty dicts with one count). The CPU time per cell
+    of a one-thread row is the cost per core."""
     from .run import progress_bar
 
     pairs = [m for m in methods if m in peer.METHODS and peer.COUNTERPART[m] in methods]

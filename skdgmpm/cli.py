@@ -152,6 +152,8 @@ def _cmd_bench(args):
     sizes = study._int_list(args.sizes, "--sizes")
     cores = parallel.available()
     threads = study._int_list(args.threads, "--threads") if args.threads else sorted({1, cores})
+    if args.repeat < 1:
+        raise InputError(f"--repeat {args.repeat}: expected a whole number >= 1")
     rows, paired, threads_paired, probes = bench.main(methods, sizes, steps=args.steps, warmup=args.warmup,
                                                       json_path=args.json, progress=not args.quiet, threads=threads,
                                                       repeat=args.repeat)
@@ -169,17 +171,6 @@ def _cmd_bench(args):
     if ratio:
         print("\nours / peer (CPU time per cell and step, one core):\n" + ratio)
     return 0
-
-
-def _positive_int(text):
-    """An argparse type: a whole number of at least 1."""
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: must be at least 1")
-    return n
 
 
 def _out_dir(args, default, check=True):
@@ -307,7 +298,7 @@ def main(argv=None):
     p.add_argument("--json", default=None, help="also write the rows and the machine to this JSON file")
     p.add_argument("--threads", default=None,
                    help="thread counts to measure, e.g. 1,2 (default: 1 and every core: the scaling)")
-    p.add_argument("--repeat", type=_positive_int, default=1,
+    p.add_argument("--repeat", type=int, default=1,
                    help="measure the paired thread scaling this many times, the methods in turn (each "
                         "repeat and the lowest speed-up printed)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -200,9 +200,13 @@ def test_bench_repeats_the_paired_scaling(tmp_path, capsys):
     assert "(repeat 2): 2 threads x" in text and "dgmpm-dcu 64 cells, paired, 2 of 2 repeats: 2 threads x" in text
 
 
-@pytest.mark.parametrize("value, says", [("0", "'0': must be at least 1"), ("two", "'two' is not a whole number")])
-def test_bench_repeat_must_be_a_positive_whole_number(value, says, capsys):
-    with pytest.raises(SystemExit) as stop:
-        main(["bench", "--repeat", value])
+def test_bench_repeat_must_be_a_positive_whole_number(capsys):
+    from skdgmpm.cli import EXIT_INPUT
+
+    assert main(["bench", "--repeat", "0"]) == EXIT_INPUT        # before any measurement
+    assert capsys.readouterr().err.strip() == "error: --repeat 0: expected a whole number >= 1"
+    with pytest.raises(SystemExit) as stop:                        # not a number: argparse's one line
+        main(["bench", "--repeat", "two"])
     assert stop.value.code == 2
-    assert capsys.readouterr().err.strip().splitlines()[-1] == f"skdgmpm bench: error: argument --repeat: {says}"
+    assert capsys.readouterr().err.strip().splitlines()[-1] == ("skdgmpm bench: error: argument --repeat: invalid int "
+                                                                "value: 'two'")
