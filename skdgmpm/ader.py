@@ -435,7 +435,7 @@ class ADERDGFEM(DGFEM):
         face states (tangent, Riemann problem) are taken at every node."""
         n_t, nc = len(self.tau), dofs.shape[1]
         u_hat, q_hat = u_hat.reshape(n_t, -1, nc), q_hat.reshape(n_t, -1, nc)
-        R = system.volume_flux(q_sum.reshape(-1, nc), self.K, np.zeros_like(dofs))
+        R = system.volume_flux(q_sum.reshape(-1, nc), self.K)
         work = self.surface_integral(u_hat, q_hat, time, dt, R)
         if source is not None:
             R += self.source_integral(_time_sum(self.w_tau, source))
@@ -469,18 +469,18 @@ class ADERDGFEM(DGFEM):
         return work
 
     @stage
-    def advance(self, U, time, dt, Q_points=None, U_points=None):
-        """The predictor from the dofs U (their values U_points at the Gauss points, and the law
-        there Q_points, where known), then the corrector: the new dofs and the boundary work."""
+    def advance(self, U, time, dt, U_points, Q_points):
+        """The predictor from the dofs U, their values U_points at the Gauss points and the law
+        there Q_points (the state's: its Taylor guess), then the corrector: the new dofs and the
+        boundary work."""
         S = self.space_time_source(self.gauss, time, dt)       # predictor and corrector share it
-        U_points = parallel.matmul(self.B, U) if U_points is None else U_points
         return self.corrector(U, *self.predictor(U_points, dt, S, Q_points), time, dt, S)
 
     def step(self, state, dt_max=np.inf):
         self.history_n = state.history          # the predictor's law reads the history of t_n
 
         def attempt(dt):            # the state's U and Q: B dofs and the law at the Gauss points at t_n
-            dofs, work = self.advance(state.dofs, state.t, dt, state.Q, state.U)
+            dofs, work = self.advance(state.dofs, state.t, dt, state.U, state.Q)
             return self.evaluate_points(state, dofs, dt), work
 
         return self.step_with_cfl_guard(state, dt_max, attempt)

@@ -190,10 +190,11 @@ class DGFEM(GodunovScheme):
         return self.materials.state(U, self.cell_material[cells], rho, history)
 
     @stage
-    def gauss_state(self, U_dofs):
-        """Q at the Gauss points from the dofs, with the internal variables of t_n there."""
-        return self.materials.state(parallel.matmul(self.B, U_dofs), self.gauss.material, self.gauss.rho0,
-                                    self.history_n)
+    def gauss_state(self, U_dofs, U_points=None):
+        """Q at the Gauss points from the dofs (their values there, U_points, where known), with the
+        internal variables of t_n there."""
+        U = parallel.matmul(self.B, U_dofs) if U_points is None else U_points
+        return self.materials.state(U, self.gauss.material, self.gauss.rho0, self.history_n)
 
     history_n = None          # (n_gauss, n_history) internal variables of the step's t_n
 
@@ -219,10 +220,6 @@ class DGFEM(GodunovScheme):
                             np.empty((len(f), grid_state.U.shape[1])))
         return FaceStates(flux, None, None, None)
 
-    def volume_flux(self, U_dofs):
-        """sum_q w_q dPhi/dX_alpha F_alpha(Q(X_q)), the law evaluated at the Gauss points."""
-        return self.volume_flux_points(self.gauss_state(U_dofs))
-
     @stage("volume_flux")
     def volume_flux_points(self, Q):
         """The volume term from Q at the Gauss points (n_points, ncomp)."""
@@ -233,16 +230,18 @@ class DGFEM(GodunovScheme):
         each dof summing its own points (`parallel.matmul` on B^T)."""
         return parallel.matmul(self.B_T, S, scale=self.gauss.volume)
 
-    def rate_update(self, U_dofs, base, step, time, dt):
+    def rate_update(self, U_dofs, base, step, time, dt, U_points=None, Q_points=None):
         """base + step dU/dt, dU/dt = M^-1 (surface + volume terms + source), and the boundary
-        power: the terms' sum, M^-1 and the update in one pass over the cells (`mass_update`)."""
+        power: the terms' sum, M^-1 and the update in one pass over the cells (`mass_update`).
+        U_points, Q_points: U_dofs's values at the Gauss points and the law there, where known
+        (the state's, at the first stage)."""
         if self.materials.n_history:     # the law at the Gauss points only, where the history is
-            Q = self.gauss_state(U_dofs)
+            Q = self.gauss_state(U_dofs, U_points)
             R, power = self.surface_residual(GridState(U_dofs, self.project(Q)), time, dt)
-            V = self.volume_flux_points(Q)
         else:
             R, power = self.surface_residual(GridState(U_dofs, None), time, dt)
-            V = self.volume_flux(U_dofs)
+            Q = self.gauss_state(U_dofs, U_points) if Q_points is None else Q_points
+        V = self.volume_flux_points(Q)
         if self.body_force is not None:     # (R + V) + S, in that order
             R += V
             R += self.source_integral(self.source(self.gauss, time))
@@ -257,11 +256,14 @@ class DGFEM(GodunovScheme):
         return out
 
     @stage
-    def advance(self, U, time, dt):
+    def advance(self, U, time, dt, U_points, Q_points):
         """TVD-RK2 (Heun) or classical RK4 (`skdgmpm.integrators`), limiting every stage's result;
-        returns dofs and boundary work."""
+        returns dofs and boundary work. The first stage, at U, takes U's values at the Gauss points
+        U_points and the law there Q_points (None: evaluated from the history of t_n) from the
+        state: no product with B, no law's pass."""
         def rk_stage(U_eval, base, t, step):
-            U_next, power = self.rate_update(U_eval, base, step, t, dt)
+            at = (U_points, Q_points) if U_eval is U else (None, None)
+            U_next, power = self.rate_update(U_eval, base, step, t, dt, *at)
             return self.limit(U_next), power
 
         return integrators.INTEGRATORS[self.integrator](rk_stage, U, time, dt)
@@ -290,8 +292,12 @@ class DGFEM(GodunovScheme):
     def step(self, state, dt_max=np.inf):
         self.history_n = state.history          # every stage's law reads the history of t_n
 
+        # the state's U and Q: B dofs and the law at the Gauss points (evaluate_points); a law
+        # with internal variables has Q of its updated ones there, not those of t_n
+        Q = None if self.materials.n_history else state.Q
+
         def attempt(dt):
-            dofs, work = self.advance(state.dofs, state.t, dt)
+            dofs, work = self.advance(state.dofs, state.t, dt, state.U, Q)
             return self.evaluate_points(state, dofs, dt), work
 
         return self.step_with_cfl_guard(state, dt_max, attempt)

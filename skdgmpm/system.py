@@ -150,7 +150,7 @@ def volume_flux(Q, stiffness, out=None):
     pass over the rows."""
     if not isinstance(stiffness, Stiffness):
         stiffness = Stiffness(stiffness)
-    R = np.empty_like(Q) if out is None else out
+    R = np.empty((stiffness.shape[0], Q.shape[1])) if out is None else out
     (indptr, indices, data), kernel, add = stiffness, _volume_flux(len(stiffness[2])), out is not None
     parallel.rows(len(R), lambda lo, hi: kernel(Q, indptr[lo:hi + 1], indices, data, add, R[lo:hi]))
     return R
