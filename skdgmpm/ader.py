@@ -56,118 +56,112 @@ def _picard_cells(guess, U0, D, T, dt, scale, tol, n_max, law, points, out):
     q_hat, w, q_sum). U0 flat (R or 1, nel n nc).
     ``law`` = (laws, params), the law table; ``points`` = (material (nel n,), rho0 (nel n,),
     history of t_n (nel n, n_history), padding (nel n,) bool: q = 0 there). Cells are taken in
-    blocks dealt out in turn to the threads, so that a region that iterates more (an impact's
-    front) is shared among them. Returns (most iterations of a cell, mean iterations per cell,
-    cells not converged)."""
+    chunks by each thread as it is free (`parallel.rows`), so that a region that iterates more
+    (an impact's front) does not keep the other threads waiting. Returns (most iterations of a
+    cell, mean iterations per cell, cells not converged)."""
     laws, params = law
     n_r, nel, n, nc = out[0].shape
     d = D.shape[0]
     literal = d == 2 and n in (4, 9) and n_r in (2, 3)      # 2D S1T1 / S2T2: the loops unrolled
     kernel = _picard_cells_kernel(d, n if literal else None, n_r if literal else None, only_law(laws))
-    results = parallel.dealt(nel, _PICARD_BLOCK, lambda first, stride: kernel(
-        *guess, U0, D, T, dt, scale, tol, n_max, laws, params, *points, *out, first, stride, _PICARD_BLOCK))
+    results = parallel.rows(nel, lambda lo, hi: kernel(*guess, U0, D, T, dt, scale, tol, n_max, laws, params,
+                                                      *points, *out, lo, hi))
     return (max(r[0] for r in results), sum(r[1] for r in results) / max(nel, 1),
             sum(r[2] for r in results))
-
-
-# cells a thread takes at a time (`parallel.dealt`): a prime, so that a grid's rows (often 2^k
-# cells) do not put the same columns, e.g. those next to an impacted face, on the same thread
-_PICARD_BLOCK = 61
 
 
 @kernel_factory
 def _picard_cells_kernel(d, n, n_r, only):
     if n is None:                       # sizes read at run time
         def picard_cells(U, Q, D_g, g, S, U0, D, T, dt, scale, tol, n_max, laws, params, material, rho, h_n, pad,
-                         u_hat, q_hat, w, q_sum, first, stride, block):
+                         u_hat, q_hat, w, q_sum, lo, hi):
             return _picard_cells_n(U, Q, D_g, g, S, U0, D, T, dt, scale, tol, n_max, laws, params, only, material,
-                                   rho, h_n, pad, u_hat, q_hat, w, q_sum, first, stride, block, d, u_hat.shape[2],
+                                   rho, h_n, pad, u_hat, q_hat, w, q_sum, lo, hi, d, u_hat.shape[2],
                                    u_hat.shape[0])
     else:
         def picard_cells(U, Q, D_g, g, S, U0, D, T, dt, scale, tol, n_max, laws, params, material, rho, h_n, pad,
-                         u_hat, q_hat, w, q_sum, first, stride, block):
+                         u_hat, q_hat, w, q_sum, lo, hi):
             return _picard_cells_n(U, Q, D_g, g, S, U0, D, T, dt, scale, tol, n_max, laws, params, only, material,
-                                   rho, h_n, pad, u_hat, q_hat, w, q_sum, first, stride, block, d, n, n_r)
+                                   rho, h_n, pad, u_hat, q_hat, w, q_sum, lo, hi, d, n, n_r)
     return picard_cells
 
 
 @njit(cache=True, inline="always")
 def _picard_cells_n(U, Q, D_g, g, S, U0, D, T, dt, scale, tol, n_max, laws, params, only, material, rho, h_n, pad,
-                    u_hat, q_hat, w, q_sum, first, stride, block, d, n, n_r):
+                    u_hat, q_hat, w, q_sum, lo, hi, d, n, n_r):
     nc = d * d + d
-    nel, n_h = u_hat.shape[1], h_n.shape[1]
+    n_h = h_n.shape[1]
     s, o, x, row, big = scratch((nc,)), scratch((nc,)), scratch((nc,)), scratch((nc,)), scratch((nc,))
     dv, F, P = scratch((n_r, nc)), scratch((3, 3)), scratch((d, d))
     h_k_n, h_k = scratch((n_h,)), scratch((n_h,))
     u, new, q = np.empty((n_r, n, nc)), np.empty((n_r, n, nc)), np.empty((n_r, n, nc))     # one cell's
     most, total, missed = 0, 0, 0
-    for start in range(first * block, nel, stride * block):
-        for c in range(start, min(start + block, nel)):
-            for k in range(n):
-                if len(g):                          # the Taylor guess (L23 eq 64)
-                    _divergence_point(Q, c, D_g, c, k, s, o, d, n)
-                    for t in range(n_r):
-                        for v in range(nc):
-                            acc = 0.0
-                            acc += g[t] * o[v]
-                            y = U[c, k, v] - 1.0 * acc
-                            u[t, k, v] = y + g[t] * S[t, c, k, v] if len(S) else y
-                else:
-                    for t in range(n_r):
-                        for v in range(nc):
-                            u[t, k, v] = U[c, k, v]
-            change, it = np.nan, 0
-            while it < n_max:
-                it += 1
-                for t in range(n_r):                # the law at every point and node
-                    for k in range(n):
-                        p = c * n + k
-                        for v in range(nc):
-                            x[v] = u[t, k, v]
-                        for v in range(n_h):
-                            h_k_n[v] = h_n[p, v]
-                        law_point(laws, params, material[p], only, x, h_k_n, h_k, rho[p], F, P, row, d)
-                        for v in range(nc):
-                            q[t, k, v] = 0.0 if pad[p] else row[v]
-                for v in range(nc):
-                    big[v] = 0.0
-                for k in range(n):
-                    for b in range(n_r):
-                        _divergence_point(q, b, D, c, k, s, o, d, n)
-                        for v in range(nc):
-                            dv[b, v] = o[v]
-                    p = c * n + k
-                    for t in range(n_r):            # new = U0 - dt T DIV F(q) at point p
-                        t_0 = t if len(U0) > 1 else 0
-                        for v in range(nc):
-                            acc = 0.0
-                            for r in range(n_r):
-                                acc += T[t, r] * dv[r, v]
-                            y = U0[t_0, p * nc + v] - dt * acc
-                            new[t, k, v] = y
-                            e = abs(y - u[t, k, v])
-                            big[v] = e if (e > big[v] or e != e) else big[v]
-                u, new = new, u
-                change = 0.0
-                for v in range(nc):
-                    e = big[v] / scale[v]
-                    change = e if (e > change or e != e) else change
-                if change <= tol:
-                    break
-            for t in range(n_r):
-                for k in range(n):
+    for c in range(lo, hi):
+        for k in range(n):
+            if len(g):                          # the Taylor guess (L23 eq 64)
+                _divergence_point(Q, c, D_g, c, k, s, o, d, n)
+                for t in range(n_r):
                     for v in range(nc):
-                        u_hat[t, c, k, v] = u[t, k, v]
-                        q_hat[t, c, k, v] = q[t, k, v]
-            for k in range(n):                      # sum_s w_s q_hat[s], in the order of `_time_sum`
+                        acc = 0.0
+                        acc += g[t] * o[v]
+                        y = U[c, k, v] - 1.0 * acc
+                        u[t, k, v] = y + g[t] * S[t, c, k, v] if len(S) else y
+            else:
+                for t in range(n_r):
+                    for v in range(nc):
+                        u[t, k, v] = U[c, k, v]
+        change, it = np.nan, 0
+        while it < n_max:
+            it += 1
+            for t in range(n_r):                # the law at every point and node
+                for k in range(n):
+                    p = c * n + k
+                    for v in range(nc):
+                        x[v] = u[t, k, v]
+                    for v in range(n_h):
+                        h_k_n[v] = h_n[p, v]
+                    law_point(laws, params, material[p], only, x, h_k_n, h_k, rho[p], F, P, row, d)
+                    for v in range(nc):
+                        q[t, k, v] = 0.0 if pad[p] else row[v]
+            for v in range(nc):
+                big[v] = 0.0
+            for k in range(n):
+                for b in range(n_r):
+                    _divergence_point(q, b, D, c, k, s, o, d, n)
+                    for v in range(nc):
+                        dv[b, v] = o[v]
+                p = c * n + k
+                for t in range(n_r):            # new = U0 - dt T DIV F(q) at point p
+                    t_0 = t if len(U0) > 1 else 0
+                    for v in range(nc):
+                        acc = 0.0
+                        for r in range(n_r):
+                            acc += T[t, r] * dv[r, v]
+                        y = U0[t_0, p * nc + v] - dt * acc
+                        new[t, k, v] = y
+                        e = abs(y - u[t, k, v])
+                        big[v] = e if (e > big[v] or e != e) else big[v]
+            u, new = new, u
+            change = 0.0
+            for v in range(nc):
+                e = big[v] / scale[v]
+                change = e if (e > change or e != e) else change
+            if change <= tol:
+                break
+        for t in range(n_r):
+            for k in range(n):
                 for v in range(nc):
-                    acc = w[0] * q[0, k, v]
-                    for t in range(1, n_r):
-                        acc += w[t] * q[t, k, v]
-                    q_sum[c, k, v] = acc
-            most = max(most, it)
-            total += it
-            missed += 0 if change <= tol else 1
+                    u_hat[t, c, k, v] = u[t, k, v]
+                    q_hat[t, c, k, v] = q[t, k, v]
+        for k in range(n):                      # sum_s w_s q_hat[s], in the order of `_time_sum`
+            for v in range(nc):
+                acc = w[0] * q[0, k, v]
+                for t in range(1, n_r):
+                    acc += w[t] * q[t, k, v]
+                q_sum[c, k, v] = acc
+        most = max(most, it)
+        total += it
+        missed += 0 if change <= tol else 1
     return most, total, missed
 
 

@@ -239,7 +239,7 @@ def _use_threads(n):
 
     parallel.set_threads(n)
     barrier = threading.Barrier(n, timeout=60)
-    parallel.rows(n * parallel.MIN_ROWS, lambda lo, hi: barrier.wait())
+    parallel.each_thread(n * parallel.MIN_ROWS, lambda lo, hi: barrier.wait())
 
 
 class Stepping:
@@ -389,7 +389,7 @@ class _ArithmeticPass:
     def __call__(self):
         from . import parallel
 
-        parallel.rows(self.threads * parallel.MIN_ROWS, self._chunk)
+        parallel.each_thread(self.threads * parallel.MIN_ROWS, self._chunk)
 
 
 def format_arithmetic(speedups):
@@ -405,12 +405,13 @@ HANDOFF_GAP_S = 5e-4       # the main thread's work between two passes of the pr
 
 
 def handoff(threads, calls=200, gap=HANDOFF_GAP_S):
-    """Seconds of an empty chunked pass (`parallel.rows` over as many chunks as threads, each doing
+    """Seconds of an empty pass with a chunk for each thread (`parallel.each_thread`, each doing
     nothing), median of ``calls``, the main thread busy for ``gap`` s between two (the workers
-    idle, as between a step's passes), on each thread count: what a pass costs beyond its work
-    for handing its chunks to the threads. On a VM it is the time to wake an idle virtual CPU, and
-    it varies with the host's load: 14-23 µs and 160-420 µs on two threads of the same VM an hour
-    apart (docs/bench/session20.md)."""
+    idle, as between a step's passes), on each thread count: what starting every thread costs.
+    On a VM it is the time to wake an idle virtual CPU, and it varies with the host's load: 14-23
+    µs and 160-420 µs on two threads of the same VM an hour apart (docs/bench/session20.md). A
+    step's passes (`parallel.rows`) no longer wait for it: a worker that starts late takes fewer
+    chunks."""
     from . import parallel
 
     previous, costs = parallel.set_threads(1), {}
@@ -423,7 +424,7 @@ def handoff(threads, calls=200, gap=HANDOFF_GAP_S):
                 t0 = time.perf_counter()
                 while time.perf_counter() - t0 < gap:
                     pass
-                times.append(_timed(lambda: parallel.rows(n, lambda lo, hi: None)))
+                times.append(_timed(lambda: parallel.each_thread(n, lambda lo, hi: None)))
             costs[t] = float(np.median(times))
     finally:
         parallel.set_threads(previous)
@@ -435,8 +436,8 @@ def format_handoff(costs):
     if len(costs) < 2:
         return ""
     parts = ", ".join(f"{t} thread{'s' if t > 1 else ''} {1e6 * c:.0f} µs" for t, c in sorted(costs.items()))
-    return (f"hand-off (an empty chunked pass, {1e6 * HANDOFF_GAP_S:.0f} µs after the last): {parts}: each pass "
-            "of a step costs that much beyond its work")
+    return (f"hand-off (an empty pass on every thread, {1e6 * HANDOFF_GAP_S:.0f} µs after the last): {parts}: "
+            "what waking the threads takes (a step's passes go on without the threads not yet awake)")
 
 
 def _timed(call):

@@ -1,5 +1,7 @@
 """Threads for the compiled passes: a loop over independent rows (faces, nodes, points) split into
-contiguous chunks that run at once, one per thread.
+contiguous chunks, `PIECES` per thread, that the threads take in turn, each the next chunk left
+as soon as it is free (`rows`): a thread that wakes late, or that the host slows, takes fewer
+chunks, and no pass waits for a worker that finds none left.
 
 Every pass that is chunked computes each row from its inputs alone and writes that row only (no
 scatter into another row, no running sum over rows): a row's value does not depend on which
@@ -23,15 +25,18 @@ cells' corrections, boundary faces, update, law's pass) over the same chunks fro
 (`compiled_chunks`, the loops in `dgmpm_kernels` and `constitutive`, each reaching its kernel
 through `kernel_cache.kernel_call`) where numba's threading layer is OpenMP or TBB: its threads
 take their chunks without the GIL and without waking from the OS, where each worker of the pool
-below wakes and takes the GIL (docs/bench/session20.md). The same chunks and kernels: the same
-bits. All the passes of that step go one way, so that numba's waiting threads, which spin a
+below wakes and takes the GIL (docs/bench/session20.md); numba hands them out in equal shares
+(its chunk size setting did not make the OpenMP layer's schedule dynamic here). The same chunks
+and kernels: the same bits. All the passes of that step go one way, so that numba's waiting threads, which spin a
 while, never hold a core that a worker of the pool needs.
 
 The thread count: `set_threads` (the scene key ``run.threads``, ``skdgmpm run --threads``), else
 $SKDGMPM_THREADS, else every core this process may use. A loop shorter than `MIN_ROWS` per thread
 runs in the calling thread (small scenes pay nothing); study workers run one thread each.
 """
+import itertools
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numba
@@ -40,7 +45,8 @@ from numba import njit, prange
 
 from .kernel_cache import kernel_factory, scratch
 
-MIN_ROWS = 2048         # rows per chunk below which a loop stays in one thread
+MIN_ROWS = 2048         # rows per thread below which a loop stays in one thread
+PIECES = 8              # chunks per thread, taken in turn as each thread is free (`rows`)
 
 _threads = None
 _pool = None
@@ -88,38 +94,82 @@ def bounds(n, parts):
     return [(n * k // parts, n * (k + 1) // parts) for k in range(parts)]
 
 
+def team(n, min_rows=None):
+    """The threads a loop over range(n) runs on: one per ``min_rows`` rows (default `MIN_ROWS`),
+    at most `threads`."""
+    return min(threads(), max(1, n // (min_rows or MIN_ROWS)))
+
+
 def chunks(n, min_rows=None):
-    """The (lo, hi) chunks `rows` splits range(n) into: one per thread, of ``min_rows`` rows at
-    least (default `MIN_ROWS`)."""
-    return bounds(n, min(threads(), max(1, n // (min_rows or MIN_ROWS))))
+    """The (lo, hi) chunks `rows` splits range(n) into: `PIECES` per thread of its `team` (one
+    where the loop runs in one thread), of ``min_rows`` / `PIECES` rows at least."""
+    t = team(n, min_rows)
+    return bounds(n, 1 if t == 1 else min(t * PIECES, n // max(1, (min_rows or MIN_ROWS) // PIECES)))
 
 
 def rows(n, call):
-    """``call(lo, hi)`` over contiguous chunks of range(n), in parallel; returns the results in
-    chunk order (the first chunk's first)."""
-    return _run(call, chunks(n))
+    """``call(lo, hi)`` over contiguous chunks of range(n), in parallel, each thread taking the
+    next chunk not yet taken until none is left; returns the results in chunk order (the first
+    chunk's first)."""
+    parts = chunks(n)
+    return _run(call, parts, team(n))
 
 
-def dealt(n, block, call):
-    """``call(first, stride)`` for each of the ``stride`` = len(`chunks`(n)) threads, in parallel:
-    the call takes the blocks first, first + stride, ... of ``block`` rows of range(n) (blocks
-    dealt out in turn, so that rows that cost more where they cluster are shared); returns the
-    results in thread order. Each row computed on its own, as in `rows`: the same bits for any
-    thread count."""
-    stride = len(chunks(n))
-    return _run(call, [(first, stride) for first in range(stride)])
-
-
-def _run(call, parts):
-    """``call(*part)`` for every part, the calling thread taking the first, the pool the others."""
+def each_thread(n, call):
+    """``call(lo, hi)`` over one contiguous chunk of range(n) per thread of its `team`, each on a
+    thread of its own at once (the calling thread the first); returns the results in chunk order.
+    For the bench's probes: the same work on every thread, each thread there to take its part."""
+    parts = bounds(n, team(n))
     if len(parts) == 1:
         return [call(*parts[0])]
+    futures = [_workers().submit(call, *part) for part in parts[1:]]
+    first = call(*parts[0])
+    return [first] + [f.result() for f in futures]
+
+
+def _workers():
     global _pool
     if _pool is None:
         _pool = ThreadPoolExecutor(max_workers=threads() - 1, thread_name_prefix="skdgmpm")
-    futures = [_pool.submit(call, *part) for part in parts[1:]]
-    first = call(*parts[0])             # the calling thread takes the first chunk itself
-    return [first] + [f.result() for f in futures]
+    return _pool
+
+
+def _run(call, parts, n_threads):
+    """``call(*part)`` for every part on ``n_threads`` threads, the calling thread among them:
+    each takes the next part not yet taken (a counter, advanced under the GIL) until none is
+    left, so that a thread that starts late, or that the machine slows, takes fewer parts than
+    the others rather than keeping them waiting. Returns once every part is done (not waiting
+    for a worker that has found none left to take), the results in part order; an error in a
+    part is raised once the parts taken are done, no other part being taken after it."""
+    if len(parts) == 1 or n_threads == 1:
+        return [call(*part) for part in parts]
+    n = len(parts)
+    results, errors = [None] * n, []
+    taken, done, finished = itertools.count(), itertools.count(1), threading.Event()
+
+    def work():
+        for k in iter(taken.__next__, None):
+            if k >= n or errors:
+                return
+            try:
+                results[k] = call(*parts[k])
+            except BaseException as error:
+                errors.append(error)
+                finished.set()
+                return
+            if next(done) == n:
+                finished.set()
+
+    futures = [_workers().submit(work) for _ in range(min(n_threads, n) - 1)]
+    work()
+    if not errors:
+        finished.wait()
+    else:                               # the parts other threads have taken: done before raising
+        for f in futures:
+            f.result()
+    if errors:
+        raise errors[0]
+    return results
 
 
 def compiled_chunks(n, min_rows=None):
@@ -134,7 +184,7 @@ def compiled_chunks(n, min_rows=None):
     parts = chunks(n, min_rows)
     if len(parts) == 1 or not _compiled_layer():
         return None
-    numba.set_num_threads(min(len(parts), numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(min(team(n, min_rows), numba.config.NUMBA_NUM_THREADS))
     return np.array([lo for lo, _ in parts] + [n], np.int64)
 
 

@@ -41,7 +41,7 @@ def test_bench_measures_each_thread_count(tmp_path, capsys):
     assert "arithmetic (exp, sqrt on" in text
     # and what an empty chunked pass costs on each (the hand-off of its chunks to the threads)
     assert set(data["machine"]["handoff_s"]) == {"1", "2"} and min(data["machine"]["handoff_s"].values()) > 0
-    assert "hand-off (an empty chunked pass" in text and "2 threads" in text
+    assert "hand-off (an empty pass on every thread" in text and "2 threads" in text
     # and the same method on both counts in one process, its line after the rows' speed-up
     (scaling,) = data["threads_paired"]
     assert "error" not in scaling and scaling["threads"] == [1, 2] and scaling["pairs"] == bench.PAIRS
@@ -143,8 +143,8 @@ def test_arithmetic_probe_gives_each_thread_count_its_share(monkeypatch):
     work: the speed-up is t times one thread's rate over t threads' rate, 1 for one thread."""
     from skdgmpm import parallel
 
-    seen, rows = [], parallel.rows
-    monkeypatch.setattr(parallel, "rows", lambda n, call: seen.append(len(parallel.chunks(n))) or rows(n, call))
+    seen, each = [], parallel.each_thread
+    monkeypatch.setattr(parallel, "each_thread", lambda n, call: seen.append(parallel.team(n)) or each(n, call))
     speedups = bench.arithmetic((1, 2), rounds=2, repeats=1)
     assert seen == [1, 1, 2, 2] and speedups[1] == 1.0 and speedups[2] > 0
     line = bench.format_arithmetic(speedups)
@@ -163,8 +163,8 @@ def test_handoff_probe_splits_an_empty_pass_over_each_count(monkeypatch):
     measures is the hand-off to that many), and its line says one cost per count."""
     from skdgmpm import parallel
 
-    seen, rows = [], parallel.rows
-    monkeypatch.setattr(parallel, "rows", lambda n, call: seen.append(len(parallel.chunks(n))) or rows(n, call))
+    seen, each = [], parallel.each_thread
+    monkeypatch.setattr(parallel, "each_thread", lambda n, call: seen.append(parallel.team(n)) or each(n, call))
     costs = bench.handoff((1, 2, 3), calls=2, gap=0.0)
     assert set(costs) == {1, 2, 3} and all(c > 0 for c in costs.values()) and seen == [1, 1, 2, 2, 3, 3]
     line = bench.format_handoff(costs)

@@ -106,7 +106,8 @@ def test_non_uniform_or_rotated_grid_is_rejected():
 
 def test_half_lengths_in_the_pass_match_the_separate_step():
     """The weights pass forms cpGIMP's half-lengths itself (``F``): the same values as
-    `half_lengths` before it, on two threads (two chunks of particles and of nodes)."""
+    `half_lengths` before it, on two threads (`parallel.PIECES` chunks of particles and of nodes
+    per thread)."""
     from skdgmpm import parallel
 
     previous = parallel.set_threads(2)
@@ -121,7 +122,7 @@ def test_half_lengths_in_the_pass_match_the_separate_step():
         apart = shape_functions(L, x, "cpgimp", half_lengths("cpgimp", l0, F, L.h))
         assert np.array_equal(fused.values, apart.values) and np.array_equal(fused.cols, apart.cols)
         T = parallel.Transposed(fused.indptr, fused.cols, L.n_nodes)
-        assert len(T.chunks) == 2
+        assert len(T.chunks) == 2 * parallel.PIECES
         assert np.array_equal(T.first, fused.pattern_T.first) and np.array_equal(T.last, fused.pattern_T.last)
     finally:
         parallel.set_threads(previous)

@@ -1,6 +1,9 @@
 """Threads never change answers: the chunked passes (`skdgmpm.parallel`) give the same bits for
 1, 2 and 3 threads (3: chunks of unequal length), for every scheme. The chunk length is lowered
 so that these small grids are split into several chunks, as a 256^2 grid is."""
+import threading
+import time
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -103,20 +106,59 @@ def test_chunks_cover_the_rows_once():
             assert all(hi == lo for (_, hi), (lo, _) in zip(b[:-1], b[1:]))
 
 
-def test_dealt_blocks_cover_the_rows_once_shared_in_turn(monkeypatch):
-    """`parallel.dealt`: thread t takes blocks t, t + T, ...; every row once, for any count."""
-    monkeypatch.setattr(parallel, "MIN_ROWS", 4)
+def test_rows_takes_every_chunk_once_and_a_slow_thread_takes_fewer(monkeypatch):
+    """`parallel.rows`: every chunk once, results in chunk order, for any count; a thread the
+    machine slows (here: the worker, each of its chunks made to last 20 ms) takes fewer chunks,
+    the calling thread taking those left rather than waiting for it."""
+    monkeypatch.setattr(parallel, "MIN_ROWS", 16)
+    main = threading.get_ident()
     try:
         for threads in (1, 2, 3):
             parallel.set_threads(threads)
             for n in (0, 5, 64, 201):
-                taken = parallel.dealt(n, 8, lambda first, stride: [
-                    (row, first) for start in range(first * 8, n, stride * 8)
-                    for row in range(start, min(start + 8, n))])
-                rows = sorted(r for part in taken for r, _ in part)
-                assert rows == list(range(n))
-                if n >= 8 * threads * 2:        # a clustered region (the first blocks) is shared
-                    assert len({t for r, t in (p for part in taken for p in part) if r < 8 * threads}) == threads
+                taken = parallel.rows(n, lambda lo, hi: (lo, hi))
+                team = min(threads, max(1, n // 16))
+                assert taken == parallel.chunks(n) and len(taken) == (1 if team == 1 else parallel.PIECES * team)
+        parallel.set_threads(2)
+
+        def chunk(lo, hi):
+            if threading.get_ident() != main:
+                time.sleep(0.02)
+            return threading.get_ident() == main
+        by_main = parallel.rows(256, chunk)
+        assert len(by_main) == 16 and sum(by_main) >= 12
+    finally:
+        parallel.set_threads(None)
+
+
+def test_an_error_in_a_chunk_is_raised_and_the_threads_go_on(monkeypatch):
+    """A chunk's error reaches the caller (once the chunks being run are done), and the next
+    pass runs on the same threads."""
+    monkeypatch.setattr(parallel, "MIN_ROWS", 16)
+
+    def chunk(lo, hi):
+        if lo == parallel.chunks(256)[3][0]:
+            raise ValueError("chunk 3")
+        return lo
+    try:
+        parallel.set_threads(2)
+        with pytest.raises(ValueError, match="chunk 3"):
+            parallel.rows(256, chunk)
+        assert parallel.rows(256, lambda lo, hi: lo) == [lo for lo, _ in parallel.chunks(256)]
+    finally:
+        parallel.set_threads(None)
+
+
+def test_each_thread_runs_its_chunk_on_a_thread_of_its_own():
+    """`parallel.each_thread`: one chunk per thread, all at once (a barrier every chunk waits at
+    would time out otherwise), as the bench's probes need."""
+    try:
+        for threads in (1, 2, 3):
+            parallel.set_threads(threads)
+            barrier = threading.Barrier(threads, timeout=10)
+            seen = parallel.each_thread(threads * parallel.MIN_ROWS, lambda lo, hi: (barrier.wait(),
+                                                                                      threading.get_ident())[1])
+            assert len(set(seen)) == threads
     finally:
         parallel.set_threads(None)
 
