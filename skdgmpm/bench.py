@@ -233,8 +233,9 @@ def measure_pair(method, n, steps=5, warmup=2):
 
 def _use_threads(n):
     """Switch the passes to ``n`` threads with their workers running: `parallel.set_threads` drops
-    the pool of another count, whose new workers would otherwise start inside the next timed step
-    (each blocks on the barrier, so the pool starts all n - 1 of them)."""
+    a pool too small for n, whose new workers would otherwise start inside the next timed step
+    (each blocks on the barrier, so the pool starts all n - 1 of them); a larger one is kept, its
+    workers the same from round to round."""
     from . import parallel
 
     parallel.set_threads(n)
