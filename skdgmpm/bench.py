@@ -267,6 +267,8 @@ def alternate_threads(disc, threads, pairs, warmup, probe_rounds=0):
     sides = [step] * T + ([_ArithmeticPass(t, probe_rounds) for t in threads] if probe_rounds else [])
 
     def before(i):
+        if i >= T:              # the probe on workers started for it (`parallel.restart`)
+            parallel.restart()
         _use_threads(threads[i % T])
         if i >= T:              # numba's threads, spinning after a compiled chunk loop, gone to sleep
             time.sleep(PROBE_PAUSE_S)
