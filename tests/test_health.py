@@ -151,8 +151,8 @@ def test_the_stress_pass_assesses_f_and_p_as_the_stand_alone_check(d):
 
 
 def test_the_chunks_summaries_combine_as_one_pass_over_the_points():
-    """Two threads, so two chunks: the first bad point in the second chunk, the minima over both
-    (`health.summarise`), as numpy's over the whole arrays."""
+    """Two threads, eight chunks each (`parallel.PIECES`): the first bad point in the last chunk,
+    the minima over all (`health.summarise`), as numpy's over the whole arrays."""
     from skdgmpm import parallel, system
     from skdgmpm.constitutive import MaterialSet
     from skdgmpm.health import Health
@@ -162,11 +162,11 @@ def test_the_chunks_summaries_combine_as_one_pass_over_the_points():
     n, d = 3 * parallel.MIN_ROWS, 2
     materials = MaterialSet((NeoHookean(E=200e9, nu=0.3, rho=7800.0),))
     F = np.eye(d)[None] + 0.1 * rng.standard_normal((n, d, d))
-    F[n - 5] = np.diag([-1.0, 1.0])          # J < 0: the first bad point, in the second chunk
+    F[n - 5] = np.diag([-1.0, 1.0])          # J < 0: the first bad point, in the last chunk
     U = system.join(F, rng.standard_normal((n, d)))
     previous = parallel.set_threads(2)
     try:
-        assert len(parallel.chunks(n)) == 2
+        assert len(parallel.chunks(n)) == 2 * parallel.PIECES
         _, _, health, _ = materials.update_and_assess(U, np.zeros(n, int), np.full(n, 7800.0), None,
                                                       (np.zeros((n, d)), np.zeros((n, d)), 1.0))
     finally:
