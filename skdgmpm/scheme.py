@@ -73,6 +73,12 @@ def cell_values(name, cells, values, n_cells):
     return out
 
 
+def boundary_power(measure, t, v):
+    """The power through boundary faces of measures ``measure`` (nf,), tractions t and velocities
+    v (nf, d) on them: sum_f |f| t_f . v_f (W), as the energy budget counts it."""
+    return float(np.sum(measure * np.einsum("fi,fi->f", t, v)))
+
+
 def stage(method):
     """A named stage of a step (the scheme's ``stages`` lists them in the order they run): each
     call's wall time, less that of the stages it calls, is added to the scheme's clock
@@ -196,8 +202,7 @@ class GodunovScheme:
         t_s, v_s = self.ghosts.star(time, t_L, v_L, Z)
         flux = normal_flux(t_s, v_s, b.normal)
         fs = FaceStates(flux, flux - normal_flux(t_L, v_L, b.normal), C, rho)
-        power = float(np.sum(b.measure * np.einsum("fi,fi->f", t_s, v_s)))
-        return fs, power
+        return fs, boundary_power(b.measure, t_s, v_s)
 
     @stage
     def interface_flux(self, grid_state):
@@ -223,9 +228,8 @@ class GodunovScheme:
         R = self.interior.integrate_jump(flux)           # side R minus side L, one pass
         self.boundary.integrate(flux_bnd, "L", R, sign=-1.0)
         if getattr(self, "ctu", None) is not None:                   # work of the corrected boundary flux
-            F, p = system.split(flux_bnd, self.d)
-            v = -np.einsum("fia,fa->fi", F, self.boundary.normal)
-            power = float(np.sum(self.boundary.measure * np.einsum("fi,fi->f", -p, v)))
+            F, p = system.split(flux_bnd, self.d)                    # F* = -v N, p* = -t
+            power = boundary_power(self.boundary.measure, -p, -np.einsum("fia,fa->fi", F, self.boundary.normal))
         return R, power
 
     @stage
