@@ -10,7 +10,7 @@ from skdgmpm.materials.points import law_table, only_law, stress_tangent_point, 
 from .dgmpm_kernels import record_width, write_record
 from .equations import embed as _embed_point, flux_state
 from .health import Health, health_point, identity_if_not, summarise, tally
-from .parallel import row_product
+from .parallel import row_product, take_chunk
 from . import parallel
 from .kernel_cache import kernel_call, kernel_factory, scratch
 from .system import DIMENSION, embed
@@ -107,17 +107,21 @@ def _states_chunks(d, assess, gathered, slots, split, only):
         x, v_old, half_dt, x_new = motion
         indptr, indices, data, nodal = gather
         rec, row, normals, rec_state = records
-        for c in prange(n):
-            lo, hi = bounds[c], bounds[c + 1]
-            a_lo, a_hi = (lo, hi) if assess else (0, 0)         # health and motion: empty without assess
-            r_lo, r_hi = (lo, hi) if slots else (0, 0)          # the records' rows: none without slots
-            first[c], J_min[c], omega_min[c] = _states_call(
-                d, assess, gathered, slots, split, only, laws, params, index[lo:hi], U[lo:hi], rho[lo:hi],
-                h_n[lo:hi], h[lo:hi], Q[lo:hi],
-                (finite[a_lo:a_hi], J[a_lo:a_hi], lowest[a_lo:a_hi], speed[a_lo:a_hi], rho_m),
-                (x[a_lo:a_hi], v_old[a_lo:a_hi], half_dt, x_new[a_lo:a_hi]),
-                (indptr[lo:hi + 1], indices, data, nodal),
-                (rec, row[r_lo:r_hi], normals, rec_state))
+        counter = np.zeros(1, np.int64)
+        for _ in prange(n):                 # each thread takes chunks until none is left
+            c = take_chunk(counter)
+            while c < n:
+                lo, hi = bounds[c], bounds[c + 1]
+                a_lo, a_hi = (lo, hi) if assess else (0, 0)         # health and motion: empty without assess
+                r_lo, r_hi = (lo, hi) if slots else (0, 0)          # the records' rows: none without slots
+                first[c], J_min[c], omega_min[c] = _states_call(
+                    d, assess, gathered, slots, split, only, laws, params, index[lo:hi], U[lo:hi], rho[lo:hi],
+                    h_n[lo:hi], h[lo:hi], Q[lo:hi],
+                    (finite[a_lo:a_hi], J[a_lo:a_hi], lowest[a_lo:a_hi], speed[a_lo:a_hi], rho_m),
+                    (x[a_lo:a_hi], v_old[a_lo:a_hi], half_dt, x_new[a_lo:a_hi]),
+                    (indptr[lo:hi + 1], indices, data, nodal),
+                    (rec, row[r_lo:r_hi], normals, rec_state))
+                c = take_chunk(counter)
         return first, J_min, omega_min
     return states_chunks
 

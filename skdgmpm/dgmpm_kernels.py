@@ -40,6 +40,7 @@ from .bcs import star_face
 from .faces import gather_row
 from .health import identity_if_not
 from .kernel_cache import kernel_call, kernel_factory, scratch
+from .parallel import take_chunk
 from .system import DIMENSION, volume_row
 
 
@@ -400,15 +401,19 @@ def _interior_chunks(d, slots, recorded, only):
                         normals, k_L, k_R, ctu, topo_L, topo_R, flux, G):
         n = len(bounds) - 1
         bad = np.full(n, -1, np.int64)
-        for c in prange(n):
-            lo, hi = bounds[c], bounds[c + 1]
-            g_lo, g_hi = (lo, hi) if ctu else (0, 0)            # G and the topology: empty without CTU
-            b = _interior_call(d, slots, recorded, only, (T_L[0][lo:hi + 1], T_L[1], T_L[2]),
-                               (T_R[0][lo:hi + 1], T_R[1], T_R[2]), U, Q, rho, N[lo:hi], cell_L[lo:hi],
-                               cell_R[lo:hi], cell_material, laws, params, rec, state, normals, k_L[lo:hi],
-                               k_R[lo:hi], ctu, (topo_L[0][g_lo:g_hi], topo_L[1][g_lo:g_hi]),
-                               (topo_R[0][g_lo:g_hi], topo_R[1][g_lo:g_hi]), flux[lo:hi], G[g_lo:g_hi])
-            bad[c] = lo + b if b >= 0 else -1
+        counter = np.zeros(1, np.int64)
+        for _ in prange(n):                 # each thread takes chunks until none is left
+            c = take_chunk(counter)
+            while c < n:
+                lo, hi = bounds[c], bounds[c + 1]
+                g_lo, g_hi = (lo, hi) if ctu else (0, 0)            # G and the topology: empty without CTU
+                b = _interior_call(d, slots, recorded, only, (T_L[0][lo:hi + 1], T_L[1], T_L[2]),
+                                   (T_R[0][lo:hi + 1], T_R[1], T_R[2]), U, Q, rho, N[lo:hi], cell_L[lo:hi],
+                                   cell_R[lo:hi], cell_material, laws, params, rec, state, normals, k_L[lo:hi],
+                                   k_R[lo:hi], ctu, (topo_L[0][g_lo:g_hi], topo_L[1][g_lo:g_hi]),
+                                   (topo_R[0][g_lo:g_hi], topo_R[1][g_lo:g_hi]), flux[lo:hi], G[g_lo:g_hi])
+                bad[c] = lo + b if b >= 0 else -1
+                c = take_chunk(counter)
         return _first_failing(bad)
     return interior_chunks
 
@@ -506,10 +511,15 @@ _corrections_call = kernel_call(_cell_corrections)
 @kernel_factory(parallel=True)
 def _corrections_chunks(slots):
     def corrections_chunks(bounds, sources, scale, signs, rec, normals, W, corr_bnd):
-        for c in prange(len(bounds) - 1):
-            lo, hi = bounds[c], bounds[c + 1]
-            _corrections_call(slots, sources[lo:hi], scale[lo:hi], signs[lo:hi], (rec[0][lo:hi], rec[1][lo:hi]),
-                              normals[lo:hi], W, corr_bnd)
+        n = len(bounds) - 1
+        counter = np.zeros(1, np.int64)
+        for _ in prange(n):                 # each thread takes chunks until none is left
+            c = take_chunk(counter)
+            while c < n:
+                lo, hi = bounds[c], bounds[c + 1]
+                _corrections_call(slots, sources[lo:hi], scale[lo:hi], signs[lo:hi], (rec[0][lo:hi], rec[1][lo:hi]),
+                                  normals[lo:hi], W, corr_bnd)
+                c = take_chunk(counter)
     return corrections_chunks
 
 
@@ -613,11 +623,15 @@ def _boundary_chunks(d, only):
                         v_s, parts):
         n = len(bounds) - 1
         bad = np.full(n, -1, np.int64)
-        for c in prange(n):
-            lo, hi = bounds[c], bounds[c + 1]
-            b = _boundary_call(d, only, lo, hi, T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo,
-                               flux, t_s, v_s, parts)
-            bad[c] = lo + b if b >= 0 else -1
+        counter = np.zeros(1, np.int64)
+        for _ in prange(n):                 # each thread takes chunks until none is left
+            c = take_chunk(counter)
+            while c < n:
+                lo, hi = bounds[c], bounds[c + 1]
+                b = _boundary_call(d, only, lo, hi, T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu,
+                                   topo, flux, t_s, v_s, parts)
+                bad[c] = lo + b if b >= 0 else -1
+                c = take_chunk(counter)
         return _first_failing(bad)
     return boundary_chunks
 
@@ -779,8 +793,13 @@ _update_call = kernel_call(_cell_update)
 @kernel_factory(parallel=True)
 def _update_chunks(nc, sides, n_faces):
     def update_chunks(bounds, cell, faces, measure, flux, corr, dt, step, inv_volume, base, out):
-        for c in prange(len(bounds) - 1):
-            lo, hi = bounds[c], bounds[c + 1]
-            _update_call(nc, sides, n_faces, cell[lo:hi], faces, measure, flux, corr, dt, step, inv_volume[lo:hi],
-                         base[lo:hi], out[lo:hi])
+        n = len(bounds) - 1
+        counter = np.zeros(1, np.int64)
+        for _ in prange(n):                 # each thread takes chunks until none is left
+            c = take_chunk(counter)
+            while c < n:
+                lo, hi = bounds[c], bounds[c + 1]
+                _update_call(nc, sides, n_faces, cell[lo:hi], faces, measure, flux, corr, dt, step, inv_volume[lo:hi],
+                             base[lo:hi], out[lo:hi])
+                c = take_chunk(counter)
     return update_chunks

@@ -148,8 +148,9 @@ def cache_dir():
 class Locator(_CacheLocator):
     """numba's cache locator for this package's own files (see the module's docstring)."""
 
-    def __init__(self, py_func, package):
+    def __init__(self, py_func, py_file, package):
         self._lineno = py_func.__code__.co_firstlineno
+        self._py_file = py_file                 # named in numba's warning when a kernel cannot be cached
         self._cache_path = os.path.join(cache_dir(), package)
 
     def get_cache_path(self):
@@ -166,7 +167,7 @@ class Locator(_CacheLocator):
         package = package_folders().get(os.path.dirname(os.path.realpath(py_file)))
         if package is None:                     # not this package's file: numba's own locators
             return None
-        self = cls(py_func, package)
+        self = cls(py_func, py_file, package)
         try:
             self.ensure_cache_path()
         except OSError:                         # not writable: numba's own locators

@@ -25,10 +25,12 @@ cells' corrections, boundary faces, update, law's pass) over the same chunks fro
 (`compiled_chunks`, the loops in `dgmpm_kernels` and `constitutive`, each reaching its kernel
 through `kernel_cache.kernel_call`) where numba's threading layer is OpenMP or TBB: its threads
 take their chunks without the GIL and without waking from the OS, where each worker of the pool
-below wakes and takes the GIL (docs/bench/session20.md); numba hands them out in equal shares
-(its chunk size setting did not make the OpenMP layer's schedule dynamic here). The same chunks
-and kernels: the same bits. All the passes of that step go one way, so that numba's waiting threads, which spin a
-while, never hold a core that a worker of the pool needs.
+below wakes and takes the GIL (docs/bench/session20.md). numba deals a ``prange`` out in equal
+shares, so each of its threads takes the next chunk left from a counter (`take_chunk`, an atomic
+add), as the pool's threads do: a core the host slows takes fewer chunks
+(docs/bench/session25.md). The same chunks and kernels: the same bits. All the passes of that
+step go one way, so that numba's waiting threads, which spin a while, never hold a core that a
+worker of the pool needs.
 
 The thread count: `set_threads` (the scene key ``run.threads``, ``skdgmpm run --threads``), else
 $SKDGMPM_THREADS, else every core this process may use. A loop shorter than `MIN_ROWS` per thread
@@ -41,7 +43,9 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numba
 import numpy as np
-from numba import njit, prange
+from numba import njit, prange, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from .kernel_cache import kernel_factory, scratch
 
@@ -79,7 +83,7 @@ def threads():
 def set_threads(n):
     """Use ``n`` threads from now on (None: back to $SKDGMPM_THREADS or every core); returns the
     setting it replaces."""
-    global _threads, _pool
+    global _threads
     if n is not None and (not isinstance(n, int) or isinstance(n, bool) or n < 1):
         raise ValueError(f"threads = {n!r}: expected a whole number >= 1")
     previous, _threads = _threads, n
@@ -87,8 +91,7 @@ def set_threads(n):
     # paired bench that alternates 1 and 2 threads then steps on the same worker each round,
     # as a run does, not on a thread new every round (RK2 at 256^2 read x1.72 so, x1.81 kept)
     if _pool is not None and _pool._max_workers < threads() - 1:
-        _pool.shutdown()
-        _pool = None
+        restart()
     return previous
 
 
@@ -212,6 +215,33 @@ def _compiled_layer():
         _start_layer(np.zeros(2))
         _LAYER = numba.threading_layer() in ("omp", "tbb")
     return _LAYER
+
+
+@intrinsic
+def _fetch_add(typingctx, counter, value):
+    """counter[0] += value as one atomic add; returns counter[0] before it."""
+    def codegen(context, builder, signature, args):
+        array = context.make_array(signature.args[0])(context, builder, args[0])
+        zero = context.get_constant(types.intp, 0)
+        first = cgutils.get_item_pointer(context, builder, signature.args[0], array, [zero])
+        return builder.atomic_rmw("add", first, args[1], "monotonic")
+    return types.int64(counter, types.int64), codegen
+
+
+@njit(cache=True, inline="always")
+def take_chunk(counter):
+    """The next chunk not yet taken in a compiled chunk loop (a count from 0, ``counter`` an int64
+    array of one zero made for the loop), for the thread that asks; the chunk count or more once
+    none is left. Each of the loop's threads takes chunks until none is left:
+
+        counter = np.zeros(1, np.int64)
+        for _ in prange(n):
+            c = take_chunk(counter)
+            while c < n:
+                ...             # chunk c
+                c = take_chunk(counter)
+    """
+    return _fetch_add(counter, np.int64(1))
 
 
 @njit(cache=True, parallel=True)

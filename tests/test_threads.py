@@ -4,6 +4,7 @@ so that these small grids are split into several chunks, as a 256^2 grid is."""
 import threading
 import time
 
+import numba
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -129,6 +130,42 @@ def test_rows_takes_every_chunk_once_and_a_slow_thread_takes_fewer(monkeypatch):
         assert len(by_main) == 16 and sum(by_main) >= 12
     finally:
         parallel.set_threads(None)
+
+
+@numba.njit(parallel=True)
+def _taken_by(cost, thread):
+    """A compiled chunk loop as the step's: chunk c, busy for cost[c] square roots, records the
+    thread that took it."""
+    n = len(cost)
+    counter = np.zeros(1, np.int64)
+    for _ in numba.prange(n):
+        c = parallel.take_chunk(counter)
+        while c < n:
+            s = 0.0
+            for i in range(cost[c]):
+                s += np.sqrt(i + 1.0)
+            thread[c] = numba.get_thread_id() + (0 if s > 0 else 100)
+            c = parallel.take_chunk(counter)
+
+
+def test_compiled_chunk_loops_take_chunks_as_each_thread_is_free():
+    """numba deals a prange out in equal shares (8 and 8 of 16 here); with `parallel.take_chunk`
+    each thread takes the next chunk left, so the thread held by a slow chunk (100 times the
+    others, ~0.1 s) takes fewer of them, every chunk taken once."""
+    if not parallel._compiled_layer() or numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("no compiled chunk loops on two threads here")
+    previous = numba.get_num_threads()
+    try:
+        numba.set_num_threads(2)
+        cost = np.full(16, 400_000)
+        cost[0] = 40_000_000
+        thread = np.full(16, -1)
+        _taken_by(cost, thread)
+    finally:
+        numba.set_num_threads(previous)
+    assert set(thread) <= {0, 1}
+    slow = thread[0]
+    assert np.count_nonzero(thread == slow) <= 4
 
 
 def test_an_error_in_a_chunk_is_raised_and_the_threads_go_on(monkeypatch):
