@@ -395,6 +395,48 @@ class _ArithmeticPass:
         parallel.each_thread(self.threads * parallel.MIN_ROWS, self._chunk)
 
 
+CORE_TURNS = 9              # turns of the cores-alone probe (each core once a turn)
+
+
+def cores_alone(turns=CORE_TURNS, rounds=PROBE_ROUNDS):
+    """Seconds of one thread's share of the arithmetic probe (`_ArithmeticPass`, ``rounds``
+    rounds) on each core this process may use, alone: a thread pinned to one core at a time, the
+    cores in turn, ``turns`` times. Returns {core: [seconds per turn]} ({} where a thread cannot
+    be pinned). On a VM the host may slow one virtual core and not the other within the same
+    second (its other guests): this project's VM's two differed by up to 1.6 times
+    (docs/bench/session25.md). Chunks taken as each thread is free (`parallel.rows`,
+    `parallel.take_chunk`) make t threads at most (sum of the t cores' speeds) / (one core's)
+    faster, not t."""
+    if not hasattr(os, "sched_setaffinity"):
+        return {}
+    cores = sorted(os.sched_getaffinity(0))
+    work, times = _ArithmeticPass(1, rounds), {core: [] for core in cores}
+
+    def pinned(core):
+        os.sched_setaffinity(0, {core})             # this thread only
+        times[core].append(_timed(lambda: work._chunk(0, 0)))
+
+    for _ in range(turns):
+        for core in cores:
+            thread = threading.Thread(target=pinned, args=(core,))
+            thread.start()
+            thread.join()
+    return times
+
+
+def format_cores_alone(times):
+    """One line: how far apart the cores were, alone, turn by turn (`cores_alone`)."""
+    if len(times) < 2:
+        return ""
+    per_turn = np.array(list(times.values()))                   # (cores, turns)
+    spread = per_turn.max(axis=0) / per_turn.min(axis=0)
+    gain = (per_turn.min(axis=0) / per_turn).sum(axis=0)         # all cores' speeds over the fastest's
+    return (f"cores alone (the arithmetic probe's share pinned to each of {len(times)} cores in turn, "
+            f"{per_turn.shape[1]} turns): the slowest took x{np.median(spread):.2f} the fastest's time "
+            f"(median; x{spread.min():.2f}-{spread.max():.2f}): {len(times)} threads taking chunks as each is "
+            f"free gain at most x{np.median(gain):.2f} (x{gain.min():.2f}-{gain.max():.2f}) over the fastest core")
+
+
 def format_arithmetic(speedups):
     """One line: the arithmetic probe's speed-up per thread count."""
     if len(speedups) < 2 or 1 not in speedups:
@@ -561,8 +603,9 @@ def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threa
     1 to ``repeat``: a speed-up is judged by each one, not by their best); write JSON if asked.
     Returns the rows, the paired rows, the paired scaling rows and the machine's probes: with
     several thread counts, the memory bandwidth on each (`memory_bandwidth`), the speed-up of
-    arithmetic (`arithmetic`) and an empty pass's cost (`handoff`), {"memory": {t: GB/s},
-    "arithmetic": {t: x}, "handoff": {t: s}} (empty dicts with one count). The CPU time per cell
+    arithmetic (`arithmetic`), an empty pass's cost (`handoff`) and each core's speed alone
+    (`cores_alone`), {"memory": {t: GB/s}, "arithmetic": {t: x}, "handoff": {t: s},
+    "cores_alone": {core: [s]}} (empty dicts with one count). The CPU time per cell
     of a one-thread row is the cost per core."""
     from .run import progress_bar
 
@@ -597,11 +640,13 @@ def main(methods, sizes, steps=5, warmup=2, json_path=None, progress=True, threa
     bar.close()
     probes = {"memory": memory_bandwidth(threads) if len(threads) > 1 else {},
               "arithmetic": arithmetic(threads) if len(threads) > 1 else {},
-              "handoff": handoff(threads) if len(threads) > 1 else {}}
+              "handoff": handoff(threads) if len(threads) > 1 else {},
+              "cores_alone": cores_alone() if len(threads) > 1 else {}}
     if json_path is not None:
         info = {**machine(), "memory_GBps": {str(t): g for t, g in probes["memory"].items()}, "memory_MiB": MEMORY_MIB,
                 "arithmetic_speedup": {str(t): x for t, x in probes["arithmetic"].items()},
-                "handoff_s": {str(t): c for t, c in probes["handoff"].items()}, "handoff_gap_s": HANDOFF_GAP_S}
+                "handoff_s": {str(t): c for t, c in probes["handoff"].items()}, "handoff_gap_s": HANDOFF_GAP_S,
+                "cores_alone_s": {str(c): v for c, v in probes["cores_alone"].items()}}
         with open(json_path, "w") as fh:
             json.dump({"machine": info, "steps": steps, "warmup": warmup, "rows": rows, "paired": paired,
                        "threads_paired": threads_paired}, fh, indent=1)

@@ -167,6 +167,7 @@ def _cmd_bench(args):
         print(bench.format_memory(probes["memory"]))
         print(bench.format_arithmetic(probes["arithmetic"]))
         print(bench.format_handoff(probes["handoff"]))
+        print(bench.format_cores_alone(probes["cores_alone"]))
     ratio = peer.format_ratio(rows, paired)
     if ratio:
         print("\nours / peer (CPU time per cell and step, one core):\n" + ratio)

@@ -1,5 +1,6 @@
 """`skdgmpm bench` runs end to end at tiny size (timings themselves are never asserted)."""
 import json
+import os
 
 import numpy as np
 import pytest
@@ -42,6 +43,10 @@ def test_bench_measures_each_thread_count(tmp_path, capsys):
     # and what an empty chunked pass costs on each (the hand-off of its chunks to the threads)
     assert set(data["machine"]["handoff_s"]) == {"1", "2"} and min(data["machine"]["handoff_s"].values()) > 0
     assert "hand-off (an empty pass on every thread" in text and "2 threads" in text
+    # and each core's speed alone, turn by turn (one line where there are several)
+    cores = {str(c) for c in os.sched_getaffinity(0)} if hasattr(os, "sched_getaffinity") else set()
+    assert set(data["machine"]["cores_alone_s"]) == cores
+    assert ("cores alone (the arithmetic probe's share pinned" in text) == (len(cores) > 1)
     # and the same method on both counts in one process, its line after the rows' speed-up
     (scaling,) = data["threads_paired"]
     assert "error" not in scaling and scaling["threads"] == [1, 2] and scaling["pairs"] == bench.PAIRS
@@ -151,6 +156,21 @@ def test_arithmetic_probe_gives_each_thread_count_its_share(monkeypatch):
     assert "1 thread x1.00" in line and "2 threads x" in line and bench.format_arithmetic({1: 1.0}) == ""
     # relative to one thread in whatever order the counts come (--threads 2,1)
     assert bench.arithmetic((2, 1), rounds=2, repeats=1)[1] == 1.0
+
+
+def test_cores_alone_probe_times_each_core_in_turn():
+    """Each core this process may use gets one timed share per turn, on a thread pinned to it; the
+    line gives the slowest core's time over the fastest's and what all cores together can gain
+    over the fastest (fabricated turns: core 1 x1.5, x1, x2 the time of core 0)."""
+    if not hasattr(os, "sched_setaffinity"):
+        pytest.skip("threads cannot be pinned here")
+    times = bench.cores_alone(turns=2, rounds=2)
+    assert set(times) == set(os.sched_getaffinity(0)) and all(len(v) == 2 and min(v) > 0 for v in times.values())
+    line = bench.format_cores_alone({0: [1.0, 1.0, 1.0], 1: [1.5, 1.0, 2.0]})
+    # spread 1.5, 1, 2 (median 1.5); gain 1 + 1/1.5, 2, 1.5 (median 1.67)
+    assert "slowest took x1.50 the fastest's time (median; x1.00-2.00)" in line
+    assert "gain at most x1.67 (x1.50-2.00)" in line
+    assert bench.format_cores_alone({0: [1.0]}) == ""
 
 
 def test_unknown_benchmark_is_a_clear_error():
