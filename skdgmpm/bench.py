@@ -406,7 +406,9 @@ def cores_alone(turns=CORE_TURNS, rounds=PROBE_ROUNDS):
     second (its other guests): this project's VM's two differed by up to 1.6 times
     (docs/bench/session25.md). Chunks taken as each thread is free (`parallel.rows`,
     `parallel.take_chunk`) make t threads at most (sum of the t cores' speeds) / (one core's)
-    faster, not t."""
+    faster, not t. Cores that slow each other only when both run (the host running two of them
+    on one of its own at times) look equal here: the arithmetic probe run in the same rounds as
+    the steps (`alternate_threads`) sees that."""
     if not hasattr(os, "sched_setaffinity"):
         return {}
     cores = sorted(os.sched_getaffinity(0))
