@@ -104,6 +104,25 @@ def test_kernels_are_filed_under_the_source_digest():
     assert kernel_cache.Locator.from_function(python, __file__) is None              # others: numba's own
 
 
+def test_a_kernel_that_cannot_be_cached_gets_numbas_warning_naming_its_file():
+    """numba warns, naming the kernel's file, when a compiled kernel cannot be cached (e.g. it
+    calls numba.get_num_threads()); with this package's locator that warning had failed on the
+    locator's missing file name. Here numba's own check is handed a result marked uncachable."""
+    import types
+    import warnings
+
+    from skdgmpm import system
+
+    impl = system._embed(1)._cache._impl
+    lifted = types.SimpleNamespace(can_cache=False)
+    result = types.SimpleNamespace(lifted=[lifted], fndesc=types.SimpleNamespace(qualname="embed"))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert impl.check_cachable(result) is False
+    assert [Path(w.filename).name for w in caught] == ["system.py"]
+    assert "Cannot cache compiled function" in str(caught[0].message)
+
+
 NOTICE = ("import json, sys, numpy as np; from skdgmpm import kernel_cache, system; "
           "notice = kernel_cache.compile_notice('dgmpm', 1)\n"
           "with notice: system.embed(np.ones((3, 1, 1)))\n"
