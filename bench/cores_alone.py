@@ -17,8 +17,6 @@ on the machine at hand, not test results.
 import argparse
 import json
 import os
-import threading
-import time
 
 import numpy as np
 from numba import njit
@@ -52,22 +50,6 @@ def chain(n):
     return x
 
 
-def on(core, call):
-    """Seconds of ``call()`` on a thread pinned to ``core``."""
-    out = {}
-
-    def pinned():
-        os.sched_setaffinity(0, {core})
-        t0 = time.perf_counter()
-        call()
-        out["s"] = time.perf_counter() - t0
-
-    thread = threading.Thread(target=pinned)
-    thread.start()
-    thread.join()
-    return out["s"]
-
-
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--method", default="dgmpm-dcu")
@@ -89,7 +71,7 @@ def main():
         line = []
         for name, call in work.items():
             for core in cores:
-                times[name][core].append(on(core, call))
+                times[name][core].append(bench.on_core(core, call))
             line.append(f"{name} " + " ".join(f"{1e3 * times[name][c][-1]:6.1f}" for c in cores))
         print(" | ".join(line) + " ms")
     for name in work:

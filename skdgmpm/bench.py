@@ -413,17 +413,25 @@ def cores_alone(turns=CORE_TURNS, rounds=PROBE_ROUNDS):
         return {}
     cores = sorted(os.sched_getaffinity(0))
     work, times = _ArithmeticPass(1, rounds), {core: [] for core in cores}
-
-    def pinned(core):
-        os.sched_setaffinity(0, {core})             # this thread only
-        times[core].append(_timed(lambda: work._chunk(0, 0)))
-
     for _ in range(turns):
         for core in cores:
-            thread = threading.Thread(target=pinned, args=(core,))
-            thread.start()
-            thread.join()
+            times[core].append(on_core(core, lambda: work._chunk(0, 0)))
     return times
+
+
+def on_core(core, call):
+    """Seconds of ``call()`` on a thread of its own pinned to ``core`` (Linux), the calling
+    thread waiting for it (its own affinity unchanged)."""
+    seconds = []
+
+    def pinned():
+        os.sched_setaffinity(0, {core})             # this thread only
+        seconds.append(_timed(call))
+
+    thread = threading.Thread(target=pinned)
+    thread.start()
+    thread.join()
+    return seconds[0]
 
 
 def format_cores_alone(times):
