@@ -205,11 +205,17 @@ class BoundaryGhosts:
             self.group[sel] = g
             self.schedules.append(bc.schedule)
         self.any_copy = bool(self.copy.any())
+        self._at = None                 # (amplitudes, values) of the last values_at
 
     def values_at(self, time):
-        """The imposed values (nb, d) at ``time`` (each group's schedule applied)."""
-        amplitude = np.array([schedule(time) for schedule in self.schedules])
-        return self.values * amplitude[self.group][:, None]
+        """The imposed values (nb, d) at ``time`` (each group's schedule applied): the same array
+        while the amplitudes stay as they were (every step of a constant load), never written."""
+        amplitude = tuple(schedule(time) for schedule in self.schedules)
+        kept = self._at
+        if kept is None or kept[0] != amplitude:
+            values = self.values * np.array(amplitude)[self.group][:, None]
+            self._at = kept = (amplitude, values)
+        return kept[1]
 
     def star(self, time, t_L, v_L, Z):
         """(t*, v*) (nb, d) of every boundary face at ``time``."""

@@ -45,7 +45,7 @@ def _states(d, assess, gathered, slots, split, only):  # literals: the loops unr
         one particle per cell reads its cells' records from the pass that made their states."""
         F, P, u, C = scratch((3, 3)), scratch((d, d)), scratch((nc,)), scratch((d, d, d, d))
         n_c, r, q = scratch((max(slots, 1), d)), scratch((width,)), scratch((nc,))
-        first, J_min, omega_min = -1, np.inf, np.inf
+        first, J_min, omega_min, fastest = -1, np.inf, np.inf, -np.inf
         n_h = h_n.shape[1]
         h_k_n, h_k = scratch((n_h,)), scratch((n_h,))
         finite, J, lowest, speed, rho_m = health
@@ -82,14 +82,15 @@ def _states(d, assess, gathered, slots, split, only):  # literals: the loops unr
                     tangent_call(laws, params, m, F, C, d)
                 J[k], lo, speed[k] = health_point(F, C, rho_m[m], d)
                 lowest[k] = lo if ok else np.nan
-                first, J_min, omega_min = tally(k, ok, J[k], lowest[k], first, J_min, omega_min)
+                first, J_min, omega_min, fastest = tally(k, ok, J[k], lowest[k], speed[k], first, J_min, omega_min,
+                                                         fastest)
                 x, v_old, half_dt, x_new = motion
                 for i in range(x.shape[1]):
                     x_new[k, i] = x[k, i] + half_dt * (v_old[k, i] + Q[k, dd + i])
                 if slots:
                     rec, row, normals, rec_state = records
                     write_record(q, rho[k], C, normals, row[k], rec, rec_state, n_c, r, d, slots, split)
-        return first, J_min, omega_min
+        return first, J_min, omega_min, fastest
     return states
 
 
@@ -100,9 +101,9 @@ _states_call = kernel_call(_states)
 def _states_chunks(d, assess, gathered, slots, split, only):
     def states_chunks(bounds, laws, params, index, U, rho, h_n, h, Q, health, motion, gather, records):
         """`_states` over the chunks of the points that ``bounds`` delimits, in parallel, the arrays
-        whole: each chunk's (first bad point, min J, smallest eigenvalue) into arrays."""
+        whole: each chunk's (first bad point, min J, smallest eigenvalue, fastest wave) into arrays."""
         n = len(bounds) - 1
-        first, J_min, omega_min = np.empty(n, np.int64), np.empty(n), np.empty(n)
+        first, J_min, omega_min, fastest = np.empty(n, np.int64), np.empty(n), np.empty(n), np.empty(n)
         finite, J, lowest, speed, rho_m = health
         x, v_old, half_dt, x_new = motion
         indptr, indices, data, nodal = gather
@@ -114,7 +115,7 @@ def _states_chunks(d, assess, gathered, slots, split, only):
                 lo, hi = bounds[c], bounds[c + 1]
                 a_lo, a_hi = (lo, hi) if assess else (0, 0)         # health and motion: empty without assess
                 r_lo, r_hi = (lo, hi) if slots else (0, 0)          # the records' rows: none without slots
-                first[c], J_min[c], omega_min[c] = _states_call(
+                first[c], J_min[c], omega_min[c], fastest[c] = _states_call(
                     d, assess, gathered, slots, split, only, laws, params, index[lo:hi], U[lo:hi], rho[lo:hi],
                     h_n[lo:hi], h[lo:hi], Q[lo:hi],
                     (finite[a_lo:a_hi], J[a_lo:a_hi], lowest[a_lo:a_hi], speed[a_lo:a_hi], rho_m),
@@ -122,7 +123,7 @@ def _states_chunks(d, assess, gathered, slots, split, only):
                     (indptr[lo:hi + 1], indices, data, nodal),
                     (rec, row[r_lo:r_hi], normals, rec_state))
                 c = take_chunk(counter)
-        return first, J_min, omega_min
+        return first, J_min, omega_min, fastest
     return states_chunks
 
 
@@ -137,7 +138,7 @@ def _stresses(d, assess, only):         # literals: the loops unrolled, the heal
         F, P, u, C = scratch((3, 3)), scratch((d, d)), scratch((d * d,)), scratch((d, d, d, d))
         n_h = h_n.shape[1]
         h_k_n, h_k = scratch((n_h,)), scratch((n_h,))
-        first, J_min, omega_min = -1, np.inf, np.inf
+        first, J_min, omega_min, fastest = -1, np.inf, np.inf, -np.inf
         finite, J, lowest, speed, rho_m = health
         for k in range(len(F_n)):
             for i in range(d):
@@ -165,8 +166,9 @@ def _stresses(d, assess, only):         # literals: the loops unrolled, the heal
                     tangent_call(laws, params, m, F, C, d)
                 J[k], lo, speed[k] = health_point(F, C, rho_m[m], d)
                 lowest[k] = lo if ok else np.nan
-                first, J_min, omega_min = tally(k, ok, J[k], lowest[k], first, J_min, omega_min)
-        return first, J_min, omega_min
+                first, J_min, omega_min, fastest = tally(k, ok, J[k], lowest[k], speed[k], first, J_min, omega_min,
+                                                         fastest)
+        return first, J_min, omega_min, fastest
     return stresses
 
 
@@ -278,9 +280,8 @@ class MaterialSet:
         bounds = parallel.compiled_chunks(n) if slots else None
         if bounds is not None:
             chunks = _states_chunks(d, assess, gather is not None, slots, split, only_law(self.laws[0]))
-            first, J_min, omega_min = chunks(bounds, laws, params, index, U, rho, history, h, Q, health, moved,
-                                             (*A, nodal), records)
-            results = [(int(f), float(j), float(w)) for f, j, w in zip(first, J_min, omega_min)]
+            results = list(zip(*(a.tolist() for a in chunks(bounds, laws, params, index, U, rho, history, h, Q,
+                                                            health, moved, (*A, nodal), records))))
         else:
             results = parallel.rows(n, lambda lo, hi: kernel(laws, params, index[lo:hi], U[lo:hi], rho[lo:hi],
                                                              history[lo:hi], h[lo:hi], Q[lo:hi], *rows(lo, hi),

@@ -311,7 +311,8 @@ class DGMPM(GodunovScheme):
             parallel.rows(n_cells, lambda lo, hi: cell_records(
                 dofs[lo:hi], grid_state.U, grid_state.Q, rho, self.cell_material[lo:hi], *laws, normals[lo:hi],
                 _rows(rec, lo, hi), state[lo:hi]))
-        recorded = bool(np.all(state != 0))         # one particle per cell: the faces read no trace
+        # every cell recorded (one particle per cell always): the faces read no trace
+        recorded = self.cellwise or bool(np.all(state != 0))
         # CTU: with every cell recorded, the faces keep their fluctuations (nf, 2, nc) and each cell
         # sends the parts of those entering it (`cell_corrections`), in place; otherwise the faces
         # split them and keep the parts (nf, 4, nc), which each edge gathers

@@ -43,7 +43,13 @@ class Health:
     J: np.ndarray
     omega: np.ndarray
     speed: np.ndarray
-    summary: tuple = None       # (first bad point or -1, min J, smallest eigenvalue) over the finite points
+    summary: tuple = None       # (first bad point or -1, min J, smallest eigenvalue) over the finite points,
+                                # the fastest wave over all
+
+    @property
+    def fastest(self):
+        """The fastest wave speed over the points (m/s): the time step's."""
+        return self.summary[3] if self.summary is not None else float(np.max(self.speed))
 
     @property
     def bad(self):
@@ -128,26 +134,33 @@ def _health_3d(F, C, rho):
 
 
 @njit(cache=True, inline="always")
-def tally(k, ok, J, lowest, first, J_min, omega_min):
+def tally(k, ok, J, lowest, speed, first, J_min, omega_min, fastest):
     """The running summary of a chunk of points after point k: (first bad point, min J, smallest
-    eigenvalue) over its finite points, as numpy's min gives them (a nan eigenvalue stays)."""
+    eigenvalue) over its finite points, as numpy's min gives them (a nan eigenvalue stays), and
+    the fastest wave over all its points, as numpy's max gives it (the time step's, no pass of
+    its own)."""
     if first < 0 and not (ok and J > 0 and lowest > 0):
         first = k
     if ok:
         J_min = J if J < J_min else J_min
         omega_min = lowest if (lowest < omega_min or lowest != lowest) and omega_min == omega_min else omega_min
-    return first, J_min, omega_min
+    fastest = speed if (speed > fastest or speed != speed) and fastest == fastest else fastest
+    return first, J_min, omega_min, fastest
 
 
 def summarise(chunks, results):
-    """`Health.summary` of a state from its chunks' (first bad, min J, smallest eigenvalue)
-    (`parallel.rows` results, in chunk order): the first bad point of the first chunk that has
-    one; the minima over the chunks (nan where no point is finite)."""
+    """`Health.summary` of a state from its chunks' (first bad, min J, smallest eigenvalue,
+    fastest wave) (`parallel.rows` results, in chunk order): the first bad point of the first
+    chunk that has one; the minima over the chunks (nan where no point is finite); the maximum
+    (nan where a chunk's is)."""
     first = next((lo + r[0] for (lo, _), r in zip(chunks, results) if r[0] >= 0), -1)
     J_min = min(r[1] for r in results)
     omega = [r[2] for r in results]
     omega_min = np.nan if any(w != w for w in omega) else min(omega)
-    return first, (np.nan if J_min == np.inf else float(J_min)), (np.nan if omega_min == np.inf else float(omega_min))
+    fastest = [r[3] for r in results]
+    return (int(first), (np.nan if J_min == np.inf else float(J_min)),
+            (np.nan if omega_min == np.inf else float(omega_min)),
+            (np.nan if any(c != c for c in fastest) else float(max(fastest))))
 
 
 @njit(cache=True, inline="always")
@@ -166,7 +179,7 @@ def _assess(d, only):                   # literals: the (d, d) loops unrolled, o
         (nan where not finite) and the fastest wave along the axes at the law's point tangent
         (`health_point`; at F = I where not finite: J = 1). Returns the chunk's `tally`."""
         F, C, u = scratch((3, 3)), scratch((d, d, d, d)), scratch((d * d + d,))
-        first, J_min, omega_min = -1, np.inf, np.inf
+        first, J_min, omega_min, fastest = -1, np.inf, np.inf, -np.inf
         for p in range(len(U)):
             ok = True
             for k in range(d * d + d):        # U.shape[1], a literal count
@@ -182,8 +195,9 @@ def _assess(d, only):                   # literals: the (d, d) loops unrolled, o
                 tangent_point(laws, params, m, only, F, C, d)
             J[p], lo, speed[p] = health_point(F, C, rho[m], d)
             lowest[p] = lo if ok else np.nan
-            first, J_min, omega_min = tally(p, ok, J[p], lowest[p], first, J_min, omega_min)
-        return first, J_min, omega_min
+            first, J_min, omega_min, fastest = tally(p, ok, J[p], lowest[p], speed[p], first, J_min, omega_min,
+                                                     fastest)
+        return first, J_min, omega_min, fastest
     return assess
 
 

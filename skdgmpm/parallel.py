@@ -36,6 +36,7 @@ The thread count: `set_threads` (the scene key ``run.threads``, ``skdgmpm run --
 $SKDGMPM_THREADS, else every core this process may use. A loop shorter than `MIN_ROWS` per thread
 runs in the calling thread (small scenes pay nothing); study workers run one thread each.
 """
+import functools
 import itertools
 import os
 import threading
@@ -197,11 +198,33 @@ def compiled_chunks(n, min_rows=None):
     The same chunks, each computed by the same kernel: the same bits as `rows`. numba's
     threads hand over in microseconds and without the GIL, where the pool's workers each wake
     and take the GIL (0.06-0.2 ms a pass on two threads, 0.8-1.1 ms on sixteen)."""
+    bounds, n_threads = _compiled_bounds(n, min_rows, threads(), MIN_ROWS, PIECES)
+    if bounds is not None:
+        _numba_threads(n_threads)
+    return bounds
+
+
+@functools.lru_cache(maxsize=64)
+def _compiled_bounds(n, min_rows, n_threads, *settings):
+    """(bounds, numba's thread count) of `compiled_chunks` for ``n_threads`` threads and the
+    module's ``settings`` (MIN_ROWS, PIECES) then: made once per loop size (a step asks five times; making them and setting numba's count anew took 1-2 %
+    of a DGMPM step on two threads, serial); (None, 1) where `rows` runs the loop."""
     parts = chunks(n, min_rows)
     if len(parts) == 1 or not _compiled_layer():
-        return None
-    numba.set_num_threads(min(team(n, min_rows), numba.config.NUMBA_NUM_THREADS))
-    return np.array([lo for lo, _ in parts] + [n], np.int64)
+        return None, 1
+    return np.array([lo for lo, _ in parts] + [n], np.int64), min(team(n, min_rows), numba.config.NUMBA_NUM_THREADS)
+
+
+_numba_count = threading.local()
+
+
+def _numba_threads(n):
+    """numba's thread count for the calling thread's next compiled loops (numba keeps one per
+    thread), set only where it differs from the one this module set last in that thread (numba's
+    setter takes a process lock at every call)."""
+    if getattr(_numba_count, "n", None) != n:
+        numba.set_num_threads(n)
+        _numba_count.n = n
 
 
 _LAYER = None

@@ -35,11 +35,12 @@ class ParticleState:
     dofs: np.ndarray = None    # (n_dofs, d*d + d) grid unknowns of schemes that keep them (DGFEM)
     health: dict = None        # {"min_J", "min_acoustic"} over the points, set by the check
     history: np.ndarray = None  # (n, n_history) internal variables, committed once per step
+    fastest: float = None      # max of speed, from the check's pass (the time step's)
 
     def copy(self):
         return ParticleState(self.t, self.U.copy(), self.Q.copy(), self.x.copy(), self.step, self.speed,
                              None if self.dofs is None else self.dofs.copy(), self.health,
-                             None if self.history is None else self.history.copy())
+                             None if self.history is None else self.history.copy(), self.fastest)
 
 
 @dataclass
@@ -235,7 +236,8 @@ class GodunovScheme:
     @stage
     def time_step(self, state, dt_max=np.inf):
         """Delta t = CFL h_min / (k c_max) from the current fastest wave [R18 §5(b), L23 eq 67]."""
-        return min(self.cfl * self.h_min / (self.speed_factor * state.speed.max()), dt_max)
+        fastest = state.speed.max() if state.fastest is None else state.fastest
+        return min(self.cfl * self.h_min / (self.speed_factor * fastest), dt_max)
 
     speed_factor = 1.0
 
@@ -300,7 +302,7 @@ class GodunovScheme:
         the state's, if the law's pass computed it (`MaterialSet.update_and_assess`)."""
         if health is None:
             health = assess(self.materials, self.particles, state.U, state.Q)
-        state.speed, state.health = health.speed, health.record()
+        state.speed, state.fastest, state.health = health.speed, health.fastest, health.record()
         failure = health.first_failure(state, self.particles, self.d)
         if failure is not None:
             p, message = failure
