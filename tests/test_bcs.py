@@ -65,6 +65,24 @@ def test_release_and_ramp(faces):
     assert Schedule(ramp=2.0)(1.0) == 0.5 and Schedule(ramp=2.0)(3.0) == 1.0
 
 
+def test_boundary_values_follow_the_schedule_and_are_kept_while_it_stays():
+    """`BoundaryGhosts.values_at`: each group's value times its schedule's amplitude at the time;
+    the same array while no amplitude changes (a constant load: every step), a new one when one does."""
+    from skdgmpm.bcs import BoundaryGhosts
+
+    N = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0]])
+    ramped = make_bc({"kind": "traction", "value": [1e9, 0.0], "ramp": 2e-3}, 2)
+    constant = make_bc({"kind": "velocity", "value": [0.0, -3.0]}, 2)
+    ghosts = BoundaryGhosts([(np.array([True, False, True]), ramped), (np.array([False, True, False]), constant)], N)
+    a = ghosts.values_at(1e-3)
+    np.testing.assert_array_equal(a, [[0.5e9, 0.0], [0.0, -3.0], [0.5e9, 0.0]])
+    assert ghosts.values_at(1e-3) is a
+    b = ghosts.values_at(4e-3)                              # the ramp is over: amplitude 1
+    np.testing.assert_array_equal(b, [[1e9, 0.0], [0.0, -3.0], [1e9, 0.0]])
+    assert ghosts.values_at(5e-3) is b
+    np.testing.assert_array_equal(a, [[0.5e9, 0.0], [0.0, -3.0], [0.5e9, 0.0]])     # not written over
+
+
 @pytest.mark.parametrize("spec, match", [
     ({"kind": "glue"}, "kind"),
     ({"kind": "velocity"}, "value"),

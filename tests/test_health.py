@@ -105,6 +105,7 @@ def test_the_law_pass_assesses_the_state_as_the_stand_alone_check_and_numpy_do(d
     arrays = Health(fused.finite, fused.J, fused.omega, fused.speed)
     assert fused.summary == alone.summary
     assert fused.record() == arrays.record() and fused.summary[0] == int(np.flatnonzero(arrays.bad)[0]) == 7
+    assert fused.fastest == arrays.fastest == np.max(fused.speed)       # the time step's, from the pass
 
     ok = np.arange(n) != 7
     assert list(fused.finite) == list(ok) and np.isnan(fused.omega[7])
@@ -174,3 +175,15 @@ def test_the_chunks_summaries_combine_as_one_pass_over_the_points():
     arrays = Health(health.finite, health.J, health.omega, health.speed)
     assert health.summary[0] == int(np.flatnonzero(arrays.bad)[0]) >= n // 2
     assert health.record() == arrays.record()
+    assert health.fastest == np.max(health.speed) and np.argmax(health.speed) < n // 2   # not in the last chunk
+
+
+def test_the_fastest_wave_combines_as_numpys_max():
+    """`health.summarise`'s fastest wave: the largest over the chunks, nan where a chunk's is
+    (numpy's max of the speeds, which the time step read before the passes tallied it)."""
+    from skdgmpm.health import summarise
+
+    chunks = [(0, 4), (4, 8)]
+    assert summarise(chunks, [(-1, 1.0, 2.0, 5e3), (-1, 0.9, 3.0, 6e3)]) == (-1, 0.9, 2.0, 6e3)
+    assert np.isnan(summarise(chunks, [(-1, 1.0, 2.0, np.nan), (-1, 0.9, 3.0, 6e3)])[3])
+    assert np.isnan(np.max([np.nan, 6e3]))

@@ -99,6 +99,28 @@ def test_one_particle_per_cell_steps_in_compiled_chunk_loops(monkeypatch):
         assert np.array_equal(a, b)
 
 
+def test_compiled_chunks_follow_the_settings_and_set_numbas_thread_count(monkeypatch):
+    """`parallel.compiled_chunks` (its bounds made once per size): the chunks of `parallel.chunks`
+    for the thread count and MIN_ROWS of the moment, numba's thread count set to them; None on one
+    thread or where the rows are too few for two threads (MIN_ROWS 600 here)."""
+    if not parallel._compiled_layer() or parallel.numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("numba's compiled chunk loops do not run here")
+    n = 1000
+    try:
+        for min_rows in (16, 600, 100):
+            monkeypatch.setattr(parallel, "MIN_ROWS", min_rows)
+            for t in (1, 2, 1, 2):
+                parallel.set_threads(t)
+                bounds = parallel.compiled_chunks(n)
+                if t == 1 or min_rows == 600:
+                    assert bounds is None
+                    continue
+                assert list(bounds) == [lo for lo, _ in parallel.chunks(n)] + [n]
+                assert len(bounds) - 1 == 2 * parallel.PIECES and parallel.numba.get_num_threads() == 2
+    finally:
+        parallel.set_threads(None)
+
+
 def test_chunks_cover_the_rows_once():
     for n in (0, 1, 5, 4097, 10_000):
         for parts in (1, 2, 3, 7):
