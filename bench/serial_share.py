@@ -43,14 +43,15 @@ class Clock:
         return timed
 
 
-def hook(clock):
+def hook(clock, patch=setattr):
     """Time every threaded pass: the compiled chunk loops where the step calls them, the pool's
-    passes at `parallel.rows` (every chunked pass goes through it)."""
+    passes at `parallel.rows` (every chunked pass goes through it). ``patch(module, name, value)``
+    replaces each (a test passes pytest's monkeypatch.setattr, which undoes it)."""
     for name in COMPILED:
-        setattr(dgmpm, name, clock.wrap(getattr(dgmpm, name)))
+        patch(dgmpm, name, clock.wrap(getattr(dgmpm, name)))
     states_chunks = constitutive._states_chunks
-    constitutive._states_chunks = lambda *literals: clock.wrap(states_chunks(*literals))
-    parallel.rows = clock.wrap(parallel.rows)
+    patch(constitutive, "_states_chunks", lambda *literals: clock.wrap(states_chunks(*literals)))
+    patch(parallel, "rows", clock.wrap(parallel.rows))
 
 
 def share(method, n, steps, threads, clock):

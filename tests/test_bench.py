@@ -230,3 +230,36 @@ def test_bench_repeat_must_be_a_positive_whole_number(capsys):
     assert stop.value.code == 2
     assert capsys.readouterr().err.strip().splitlines()[-1] == ("skdgmpm bench: error: argument --repeat: invalid int "
                                                                 "value: 'two'")
+
+
+def test_serial_share_times_every_threaded_pass_once(monkeypatch):
+    """bench/serial_share.py: with its hooks, a DCU step's four compiled chunk loops (MIN_ROWS 16,
+    so that 32^2 runs them on two threads) are timed from the calling thread, a pass inside
+    another counted once; what is left of the step is its share outside them."""
+    import importlib.util
+    import time
+    from pathlib import Path
+    from skdgmpm import parallel
+
+    path = Path(__file__).parent.parent / "bench" / "serial_share.py"
+    spec = importlib.util.spec_from_file_location("serial_share", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    clock = script.Clock()
+    nested = clock.wrap(lambda: clock.wrap(lambda: time.sleep(0.02))())
+    nested()
+    assert clock.depth == 0 and 0.02 <= clock.seconds < 0.04          # once, not twice
+    monkeypatch.setattr(parallel, "MIN_ROWS", 16)
+    calls = []
+    wrap = clock.wrap
+    monkeypatch.setattr(clock, "wrap", lambda call: wrap(
+        lambda *a, **k: calls.append(getattr(call, "__name__", "")) or call(*a, **k)))
+    script.hook(clock, monkeypatch.setattr)
+    try:
+        wall, inside, outside = script.share("dgmpm-dcu", 32, 3, 2, clock)
+    finally:
+        parallel.set_threads(None)
+    if parallel._compiled_layer():                  # law's pass, faces, boundary faces, update: each step
+        for loop in ("states_chunks", "interior_chunks", "boundary_chunks", "update_chunks"):
+            assert calls.count(loop) >= 3 + 3, (loop, calls)      # the 3 warm-up steps too (and repeats)
+    assert 0 < inside < wall and 0 < outside < wall         # medians over the steps, each its own
