@@ -44,7 +44,7 @@ def only_law(laws):
     literal ``only`` handed to the dispatch below): a kernel of one law is typed and compiled with
     that law's code alone. The other laws' branches in the loop cost a fifth of the DGMPM law
     pass even where never taken (the loop's values no longer stay in registers)."""
-    ids = laws.tolist()             # a few materials: Python's count, not a numpy pass (every call of a step)
+    ids = laws.tolist()             # a few materials: counted in Python (numpy's calls showed in a step's profile)
     return ids[0] if ids and ids.count(ids[0]) == len(ids) else ANY_LAW
 
 

@@ -206,9 +206,10 @@ def compiled_chunks(n, min_rows=None):
 
 @functools.lru_cache(maxsize=64)
 def _compiled_bounds(n, min_rows, n_threads, *settings):
-    """(bounds, numba's thread count) of `compiled_chunks` for ``n_threads`` threads and the
-    module's ``settings`` (MIN_ROWS, PIECES) then: made once per loop size (a step asks five times; making them and setting numba's count anew took 1-2 %
-    of a DGMPM step on two threads, serial); (None, 1) where `rows` runs the loop."""
+    """(bounds, numba's thread count) of `compiled_chunks`, made once for each set of what they
+    depend on: the loop size, `threads` and the module's ``settings`` (MIN_ROWS, PIECES), passed
+    as the cache's key. A step asks five times; making them and setting numba's count anew took
+    1-2 % of a DGMPM step on two threads, on one thread. (None, 1) where `rows` runs the loop."""
     parts = chunks(n, min_rows)
     if len(parts) == 1 or not _compiled_layer():
         return None, 1
