@@ -103,7 +103,7 @@ def test_compiled_chunks_follow_the_settings_and_set_numbas_thread_count(monkeyp
     """`parallel.compiled_chunks` (its bounds made once per size): the chunks of `parallel.chunks`
     for the thread count and MIN_ROWS of the moment, numba's thread count set to them; None on one
     thread or where the rows are too few for two threads (MIN_ROWS 600 here)."""
-    if not parallel._compiled_layer() or parallel.numba.config.NUMBA_NUM_THREADS < 2:
+    if not parallel._compiled_layer() or numba.config.NUMBA_NUM_THREADS < 2:
         pytest.skip("numba's compiled chunk loops do not run here")
     n = 1000
     try:
@@ -116,7 +116,7 @@ def test_compiled_chunks_follow_the_settings_and_set_numbas_thread_count(monkeyp
                     assert bounds is None
                     continue
                 assert list(bounds) == [lo for lo, _ in parallel.chunks(n)] + [n]
-                assert len(bounds) - 1 == 2 * parallel.PIECES and parallel.numba.get_num_threads() == 2
+                assert len(bounds) - 1 == 2 * parallel.PIECES and numba.get_num_threads() == 2
     finally:
         parallel.set_threads(None)
 
