@@ -284,5 +284,5 @@ def tangent_block(material, F, d):
     laws, params = law_table([material])
     C = np.empty((len(flat), d, d, d, d))
     kernel = _tangents(d, only_law(laws))
-    parallel.rows(len(flat), lambda lo, hi: kernel(laws, params, flat[lo:hi], C[lo:hi]))
+    parallel.chunked(len(flat), kernel, "wwrr", (laws, params, flat, C))
     return C.reshape(shape + (d, d, d, d))

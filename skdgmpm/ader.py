@@ -56,7 +56,7 @@ def _picard_cells(guess, U0, D, T, dt, scale, tol, n_max, law, points, out):
     q_hat, w, q_sum). U0 flat (R or 1, nel n nc).
     ``law`` = (laws, params), the law table; ``points`` = (material (nel n,), rho0 (nel n,),
     history of t_n (nel n, n_history), padding (nel n,) bool: q = 0 there). Cells are taken in
-    chunks by each thread as it is free (`parallel.rows`), so that a region that iterates more
+    chunks by each thread as it is free (`parallel.chunked`), so that a region that iterates more
     (an impact's front) does not keep the other threads waiting. Returns (most iterations of a
     cell, mean iterations per cell, cells not converged)."""
     laws, params = law
@@ -64,10 +64,9 @@ def _picard_cells(guess, U0, D, T, dt, scale, tol, n_max, law, points, out):
     d = D.shape[0]
     literal = d == 2 and n in (4, 9) and n_r in (2, 3)      # 2D S1T1 / S2T2: the loops unrolled
     kernel = _picard_cells_kernel(d, n if literal else None, n_r if literal else None, only_law(laws))
-    results = parallel.rows(nel, lambda lo, hi: kernel(*guess, U0, D, T, dt, scale, tol, n_max, laws, params,
-                                                      *points, *out, lo, hi))
-    return (max(r[0] for r in results), sum(r[1] for r in results) / max(nel, 1),
-            sum(r[2] for r in results))
+    args = (*guess, U0, D, T, dt, scale, tol, n_max, laws, params, *points, *out)
+    results = parallel.chunked(nel, kernel, "w" * len(args) + "lh", args, 3).astype(np.int64)
+    return int(results[:, 0].max()), int(results[:, 1].sum()) / max(nel, 1), int(results[:, 2].sum())
 
 
 @kernel_factory
@@ -186,7 +185,7 @@ def _block_scale(U, dd):
     """Per component of the state (n, nc): the largest |U| of its block (F: the first dd
     components, p: the others), 1 where that is 0, nan if any is nan; the largest of the row
     chunks' (exact, in any order)."""
-    big = np.array(parallel.rows(len(U), lambda lo, hi: _block_max(U[lo:hi], dd)))       # (chunks, 2)
+    big = parallel.chunked(len(U), _block_max, "rw", (U, dd), 2)       # (chunks, 2)
     big = np.where(np.isnan(big).any(axis=0), np.nan, big.max(axis=0))
     big = np.where(big != 0.0, big, 1.0)
     return np.where(np.arange(U.shape[1]) < dd, big[0], big[1])
@@ -202,7 +201,7 @@ def _block_max(U, dd):
             k = 0 if c < dd else 1
             if x > big[k] or x != x:
                 big[k] = x
-    return big
+    return big[0], big[1]
 
 
 def _time_sum(w, a):
@@ -210,7 +209,7 @@ def _time_sum(w, a):
     that order, entry by entry (one compiled pass on the threads)."""
     out = np.empty(a.shape[1:])
     flat, o, w = a.reshape(len(a), -1), out.reshape(-1), np.asarray(w, dtype=float)
-    parallel.rows(len(o), lambda lo, hi: _time_sum_kernel(w, flat[:, lo:hi], o[lo:hi]))
+    parallel.chunked(len(o), _time_sum_kernel, "wkr", (w, flat, o))
     return out
 
 

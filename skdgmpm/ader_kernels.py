@@ -23,10 +23,9 @@ def interior_flux_sum(T_L, T_R, u_hat, q_hat, rho_L, rho_R, N, mat_L, mat_R, law
     """flux[f] = sum_s weights[s] F_N(Q*[s, f]) for every interior row f (flux (nf, nc)), both
     sides traced from the predictor (u_hat, q_hat) at each node; mat_L, mat_R (nf,) material of
     each side, (laws, params) the law table. Returns the first row that is not hyperbolic, or -1."""
-    kernel, csr = _interior_flux_sum(N.shape[1], only_law(laws)), parallel.csr_rows
-    return parallel.first_bad(len(N), lambda lo, hi: kernel(
-        csr(T_L, lo, hi), csr(T_R, lo, hi), u_hat, q_hat, rho_L[lo:hi], rho_R[lo:hi], N[lo:hi], mat_L[lo:hi],
-        mat_R[lo:hi], laws, params, weights, flux[lo:hi]))
+    return parallel.chunked(len(N), _interior_flux_sum(N.shape[1], only_law(laws)), "ccwwrrrrrwwwr",
+                            (T_L, T_R, u_hat, q_hat, rho_L, rho_R, N, mat_L, mat_R, laws, params, weights, flux),
+                            "first")
 
 
 @kernel_factory

@@ -275,9 +275,9 @@ class MaterialSet:
         else:
             def rows(lo, hi):
                 return health, moved
-        # DGMPM with one particle per cell (its records): the law's pass among the step's compiled
-        # chunk loops (`parallel.compiled_chunks`), like its other passes
-        bounds = parallel.compiled_chunks(n) if slots else None
+        # the law's pass among the step's compiled chunk loops (`parallel.compiled_chunks`), like
+        # its other passes
+        bounds = parallel.compiled_chunks(n)
         if bounds is not None:
             chunks = _states_chunks(d, assess, gather is not None, slots, split, only_law(self.laws[0]))
             results = list(zip(*(a.tolist() for a in chunks(bounds, laws, params, index, U, rho, history, h, Q,
@@ -320,11 +320,8 @@ class MaterialSet:
         F = np.ascontiguousarray(F, dtype=float)
         (laws, params), kernel = self.laws, _stresses(d, assess, only_law(self.laws[0]))
         index = np.asarray(index, dtype=np.int64)
-
-        def rows(lo, hi):
-            return tuple(a[lo:hi] for a in health[:4]) + health[4:] if assess else health
-        results = parallel.rows(n, lambda lo, hi: kernel(laws, params, index[lo:hi], F[lo:hi], h_n[lo:hi], h[lo:hi],
-                                                         P[lo:hi], rows(lo, hi)))
+        results = parallel.chunked(n, kernel, "wwrrrrr" + ("(rrrrw)" if assess else "w"),
+                                   (laws, params, index, F, h_n, h, P, health), 4)
         h = h if self.n_history else history
         if not assess:
             return P, h

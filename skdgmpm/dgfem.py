@@ -43,7 +43,7 @@ def _apply_blocks(blocks, cell_dofs, R, out, R2=None, base=None, step=1.0):
     kernel = _apply_blocks_kernel(nb if literal else None, nc if literal else None, int(R2 is not None),
                                   int(base is not None))
     R2, base = (R if R2 is None else R2), (R if base is None else base)
-    parallel.rows(len(blocks), lambda lo, hi: kernel(blocks[lo:hi], cell_dofs[lo:hi], R, R2, base, step, out))
+    parallel.chunked(len(blocks), kernel, "rrwwwww", (blocks, cell_dofs, R, R2, base, float(step), out))
 
 
 @kernel_factory

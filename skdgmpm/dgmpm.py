@@ -41,9 +41,9 @@ import scipy.sparse as sp
 from skdgmpm.materials.points import law_table
 
 from . import parallel, system
-from .dgmpm_kernels import (boundary_chunks, boundary_corrections, boundary_edge_corrections, boundary_faces,
-                            boundary_terms, cell_corrections, cell_records, cell_update, corrections_chunks, euler_update,
-                            face_width, interior_chunks, interior_pass, split_width, update_chunks)
+from .dgmpm_kernels import (boundary_corrections, boundary_edge_corrections, boundary_faces, boundary_terms,
+                            cell_corrections, cell_records, cell_update, euler_update, face_width, interior_chunks,
+                            interior_pass, split_width)
 from .errors import InputError
 from .faces import interior_faces
 from .integrators import INTEGRATORS
@@ -308,9 +308,7 @@ class DGMPM(GodunovScheme):
         rec, state = self._records()
         made, self._records_of = self._records_of, None     # the buffer is rewritten from here on
         if made is None or made[0] is not grid_state.U or made[1] is not grid_state.Q:
-            parallel.rows(n_cells, lambda lo, hi: cell_records(
-                dofs[lo:hi], grid_state.U, grid_state.Q, rho, self.cell_material[lo:hi], *laws, normals[lo:hi],
-                _rows(rec, lo, hi), state[lo:hi]))
+            cell_records(dofs, grid_state.U, grid_state.Q, rho, self.cell_material, *laws, normals, rec, state)
         # every cell recorded (one particle per cell always): the faces read no trace
         recorded = self.cellwise or bool(np.all(state != 0))
         # CTU: with every cell recorded, the faces keep their fluctuations (nf, 2, nc) and each cell
@@ -330,9 +328,9 @@ class DGMPM(GodunovScheme):
                                  f.normal[lo:hi], f.cell_L[lo:hi], f.cell_R[lo:hi], self.cell_material, *laws,
                                  (rec, state, normals, k_L[lo:hi], k_R[lo:hi], recorded), ctu, (h_L[sl], n_L[sl]),
                                  (h_R[sl], n_R[sl]), flux[lo:hi], G[sl])
-        # one particle per cell: the step's chunked passes in numba's compiled chunk loops (none
-        # on the pool, whose workers would compete with numba's spinning ones)
-        bounds = parallel.compiled_chunks(len(f)) if self.cellwise and recorded else None
+        # the step's chunked passes in numba's compiled chunk loops (`parallel.chunked`), none on
+        # the pool, whose workers would compete with numba's spinning ones
+        bounds = parallel.compiled_chunks(len(f))
         if bounds is not None:
             bad = interior_chunks(bounds, parallel.csr(T_L), parallel.csr(T_R), grid_state.U, grid_state.Q, rho,
                                   f.normal, f.cell_L, f.cell_R, self.cell_material, *laws,
@@ -344,13 +342,7 @@ class DGMPM(GodunovScheme):
         if ctu and recorded:
             sources, scale, signs = self.cell_sources
             W = G.reshape(-1, nc)
-            bounds = parallel.compiled_chunks(n_cells) if self.cellwise else None
-            if bounds is not None:
-                corrections_chunks(bounds, sources, scale, signs, rec, normals, W, corr_bnd)
-            else:
-                parallel.rows(n_cells, lambda lo, hi: cell_corrections(
-                    sources[lo:hi], scale[lo:hi], signs[lo:hi], _rows(rec, lo, hi), normals[lo:hi], W,
-                    corr_bnd))
+            cell_corrections(sources, scale, signs, rec, normals, W, corr_bnd)
             return flux, G, corr_bnd
         if ctu:
             corr = np.empty((len(f), 1, nc))
@@ -374,13 +366,7 @@ class DGMPM(GodunovScheme):
         args = (self.traces["boundary"], grid_state.U, grid_state.Q, self.density, b.normal, b.cell_L,
                 self.cell_material, *self.laws, (g.frame, g.velocity, g.values_at(time), g.copy), ctu,
                 self.topology["boundary"], flux, t_s, v_s, parts)
-        # a face costs about ten interior faces (the law's tangent, its stationary state): chunks of
-        # an eighth of the rows pay on numba's threads (the step's other passes' with one particle per cell)
-        bounds = parallel.compiled_chunks(nb, max(1, parallel.MIN_ROWS // 8)) if self.cellwise else None
-        if bounds is not None:
-            bad = boundary_chunks(bounds, *args)
-        else:
-            bad = parallel.first_bad(nb, lambda lo, hi: boundary_faces(lo, hi, *args))
+        bad = boundary_faces(*args)
         if bad >= 0:
             _not_hyperbolic(bad)
         if ctu:
@@ -519,19 +505,11 @@ class DGMPM(GodunovScheme):
         if self.cellwise:                       # base, out: the particles'
             weight = (step, self.inv_volume)
             cell, m = self.particles.cell, self.interior.measure
-            bounds = parallel.compiled_chunks(len(base))
-            if bounds is not None:
-                update_chunks(bounds, cell, self.cell_faces, m, flux, corr, dt, step, self.inv_volume, base, out)
-            else:
-                parallel.rows(len(base), lambda lo, hi: cell_update(
-                    cell[lo:hi], self.cell_faces, m, flux, corr, dt, step, self.inv_volume[lo:hi], base[lo:hi],
-                    out[lo:hi]))
+            cell_update(cell, self.cell_faces, m, flux, corr, dt, step, self.inv_volume, base, out)
         else:
             weight = (step, self.inv_M)              # step M^-1, node by node
-            csr = parallel.csr_rows
-            parallel.rows(len(base), lambda lo, hi: euler_update(
-                csr(self.gather_interior, lo, hi), flux, corr, dt, grid_state.Q, csr(self.stiffness, lo, hi),
-                base[lo:hi], (step, self.inv_M[lo:hi]), out[lo:hi]))
+            euler_update(self.gather_interior, flux, corr, dt, grid_state.Q, self.stiffness, base, (step, self.inv_M),
+                         out)
         power = self.add_boundary_terms(terms, time, dt, weight, out)
         return out, power
 
@@ -590,11 +568,6 @@ class DGMPM(GodunovScheme):
 
 
 _NO_TRACE = (np.zeros(1, np.int32), np.zeros(0, np.int32), np.zeros(0))    # an empty CSR triple: not read
-
-
-def _rows(rec, lo, hi):
-    """Rows lo:hi of the cell records rec = (face parts, split parts)."""
-    return rec[0][lo:hi], rec[1][lo:hi]
 
 
 def _local_face(mesh, cells, facets):

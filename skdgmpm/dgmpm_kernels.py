@@ -34,6 +34,7 @@ from numba import njit, prange
 
 from skdgmpm.materials.points import only_law, tangent_call, tangent_point, tangent_points
 
+from . import parallel
 from .equations import (add_normal_flux, ctu_parts, ctu_parts_opposite, ctu_split, embed, fluctuations, godunov,
                         impedance, traction)
 from .bcs import star_face
@@ -260,7 +261,8 @@ def cell_records(dofs, U, Q, rho, cell_material, laws, params, normals, rec, sta
     d, slots = normals.shape[2], normals.shape[1]
     split = rec[1].shape[1] > 0
     kernel = _cell_records(d, slots, dofs.shape[1], split, only_law(laws))
-    kernel(dofs, U, Q, rho, cell_material, laws, params, normals, rec, state)
+    parallel.chunked(len(dofs), kernel, "rwwwrwwr(rr)r", (dofs, U, Q, rho, cell_material, laws, params, normals, rec,
+                                                           state))
 
 
 @kernel_factory
@@ -460,8 +462,9 @@ def cell_corrections(sources, scale, signs, rec, normals, W, corr_bnd):
     cell reads and writes only its own faces' rows. sources (n_cells, 4) int32: 2 f + side of
     each local face, or -1 - b for boundary face b; scale (n_cells, 4): -1 / (2 h) (0 at boundary
     faces, whose fluctuations the boundary pass splits); signs (n_cells, 4): the outward normal of
-    local face k is signs[c, k] normals[c, k % slots]."""
-    _cell_corrections(normals.shape[1])(sources, scale, signs, rec, normals, W, corr_bnd)
+    local face k is signs[c, k] normals[c, k % slots]. In parallel chunks of the cells."""
+    parallel.chunked(len(sources), _cell_corrections(normals.shape[1]), "rrr(rr)rww",
+                     (sources, scale, signs, rec, normals, W, corr_bnd))
 
 
 @kernel_factory
@@ -499,30 +502,6 @@ def _cell_corrections(slots):
     return cell_corrections
 
 
-def corrections_chunks(bounds, sources, scale, signs, rec, normals, W, corr_bnd):
-    """`cell_corrections` over the chunks of the cells that ``bounds`` delimits, in parallel (the
-    arrays whole; each cell writes only its own faces' rows)."""
-    _corrections_chunks(normals.shape[1])(bounds, sources, scale, signs, rec, normals, W, corr_bnd)
-
-
-_corrections_call = kernel_call(_cell_corrections)
-
-
-@kernel_factory(parallel=True)
-def _corrections_chunks(slots):
-    def corrections_chunks(bounds, sources, scale, signs, rec, normals, W, corr_bnd):
-        n = len(bounds) - 1
-        counter = np.zeros(1, np.int64)
-        for _ in prange(n):                 # each thread takes chunks until none is left
-            c = take_chunk(counter)
-            while c < n:
-                lo, hi = bounds[c], bounds[c + 1]
-                _corrections_call(slots, sources[lo:hi], scale[lo:hi], signs[lo:hi], (rec[0][lo:hi], rec[1][lo:hi]),
-                                  normals[lo:hi], W, corr_bnd)
-                c = take_chunk(counter)
-    return corrections_chunks
-
-
 def face_corrections(corr):
     """The CTU correction per unit Delta t of each interior face (nf, nc) from `interface_flux`'s
     (nf, sides, nc): the parts both cells send (sides 2: W[:, 0] - W[:, 1], `cell_corrections`),
@@ -545,9 +524,8 @@ def boundary_edge_corrections(to_boundary, G, corr_bnd):
 
 
 # ---------------------------------------------------------------- boundary faces
-def boundary_faces(lo, hi, T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, flux, t_s, v_s,
-                   parts):
-    """Boundary faces lo:hi (absolute rows of every array): each face's interior side (traction
+def boundary_faces(T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, flux, t_s, v_s, parts):
+    """Every boundary face's interior side (traction
     t_L, velocity v_L, impedance Z = sqrt(rho0 A_N), tangent C, density), its stationary state
     (t*, v*) into t_s, v_s (nf, d) (`bcs.star_face` under the face's condition, ``ghosts`` =
     (frame (nf, d, d), imposes velocity (nf, d), values at the time (nf, d), copies the interior
@@ -555,11 +533,12 @@ def boundary_faces(lo, hi, T, U, Q, rho, N, cell, cell_material, laws, params, g
     the transverse corrections per unit Delta t of the fluctuation F_N(t*, v*) - F_N(t_L, v_L)
     entering the cell along its two edges adjacent to the face into parts (nf, 2, nc)
     (`boundary_corrections` adds them where they go). Each face writes its own rows: chunks run
-    in parallel. Returns the first face (from lo) whose acoustic tensor, along the face or (CTU)
-    an edge, is not positive definite, or -1."""
-    kernel = _boundary_faces(N.shape[1], only_law(laws))
-    return kernel(lo, hi, T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, flux, t_s, v_s,
-                  parts)
+    in parallel, each of an eighth of `parallel.MIN_ROWS` faces at least (a face costs about ten
+    interior faces: the law's tangent, its stationary state). Returns the first face whose
+    acoustic tensor, along the face or (CTU) an edge, is not positive definite, or -1."""
+    return parallel.chunked(len(N), _boundary_faces(N.shape[1], only_law(laws)), "lh" + "w" * 16,
+                            (T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, flux, t_s, v_s,
+                             parts), "first", max(1, parallel.MIN_ROWS // 8))
 
 
 @kernel_factory
@@ -603,37 +582,6 @@ def _boundary_faces(d, only):
                     parts[f, 0, k], parts[f, 1, k] = G_0[k], G_1[k]
         return -1
     return boundary_faces
-
-
-def boundary_chunks(bounds, T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, flux, t_s, v_s,
-                    parts):
-    """`boundary_faces` over the chunks that ``bounds`` delimits (`parallel.compiled_chunks`), in
-    parallel: the same bits. Returns the first failing face, or -1."""
-    kernel = _boundary_chunks(N.shape[1], only_law(laws))
-    return kernel(bounds, T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, flux, t_s, v_s,
-                  parts)
-
-
-_boundary_call = kernel_call(_boundary_faces)
-
-
-@kernel_factory(parallel=True)
-def _boundary_chunks(d, only):
-    def boundary_chunks(bounds, T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, flux, t_s,
-                        v_s, parts):
-        n = len(bounds) - 1
-        bad = np.full(n, -1, np.int64)
-        counter = np.zeros(1, np.int64)
-        for _ in prange(n):                 # each thread takes chunks until none is left
-            c = take_chunk(counter)
-            while c < n:
-                lo, hi = bounds[c], bounds[c + 1]
-                b = _boundary_call(d, only, lo, hi, T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu,
-                                   topo, flux, t_s, v_s, parts)
-                bad[c] = lo + b if b >= 0 else -1
-                c = take_chunk(counter)
-        return _first_failing(bad)
-    return boundary_chunks
 
 
 @njit(cache=True, nogil=True)
@@ -709,8 +657,10 @@ def euler_update(gather, flux, corr, dt, Q, stiffness, base, weight, out):
     them (nf, sides, nc), `face_corrections`, and w = step M^-1 given as ``weight`` = (step,
     inv_M (n_dofs,)).
     G (n_dofs, nf) is the interior surface integral as a gather (`DGMPM.gather_interior`): row i
-    holds measure_f (T_R - T_L)[f, i] over the faces f of node i."""
-    _euler_update(flux.shape[1], corr.shape[1])(gather, flux, corr, dt, Q, stiffness, base, weight, out)
+    holds measure_f (T_R - T_L)[f, i] over the faces f of node i. In parallel chunks of the
+    nodes."""
+    parallel.chunked(len(base), _euler_update(flux.shape[1], corr.shape[1]), "cwwwwcr(wr)r",
+                     (tuple(gather), flux, corr, dt, Q, tuple(stiffness), base, weight, out))
 
 
 @kernel_factory
@@ -748,9 +698,9 @@ def cell_update(cell, faces, measure, flux, corr, dt, step, inv_volume, base, ou
     nodes, a face's trace weights to one). s_k = -1 where the cell is side L of face f, +1 side
     R. cell (n,) the particle's cell; faces (n_cells, faces per cell) int32: 2 f + side of each
     local face, negative at boundary faces (their terms are added after, `add_boundary_terms`);
-    corr as `interface_flux` keeps it (nf, sides, nc)."""
-    _cell_update(flux.shape[1], corr.shape[1], faces.shape[1])(cell, faces, measure, flux, corr, dt, step,
-                                                               inv_volume, base, out)
+    corr as `interface_flux` keeps it (nf, sides, nc). In parallel chunks of the particles."""
+    parallel.chunked(len(cell), _cell_update(flux.shape[1], corr.shape[1], faces.shape[1]), "rwwwwwwrrr",
+                     (cell, faces, measure, flux, corr, dt, step, inv_volume, base, out))
 
 
 @kernel_factory
@@ -778,28 +728,3 @@ def _cell_update(nc, sides, n_faces):
             for k in range(nc):
                 out[p, k] = base[p, k] + w * r[k]
     return cell_update
-
-
-def update_chunks(bounds, cell, faces, measure, flux, corr, dt, step, inv_volume, base, out):
-    """`cell_update` over the chunks of the particles that ``bounds`` delimits, in parallel (the
-    particles' arrays whole)."""
-    _update_chunks(flux.shape[1], corr.shape[1], faces.shape[1])(bounds, cell, faces, measure, flux, corr, dt, step,
-                                                                 inv_volume, base, out)
-
-
-_update_call = kernel_call(_cell_update)
-
-
-@kernel_factory(parallel=True)
-def _update_chunks(nc, sides, n_faces):
-    def update_chunks(bounds, cell, faces, measure, flux, corr, dt, step, inv_volume, base, out):
-        n = len(bounds) - 1
-        counter = np.zeros(1, np.int64)
-        for _ in prange(n):                 # each thread takes chunks until none is left
-            c = take_chunk(counter)
-            while c < n:
-                lo, hi = bounds[c], bounds[c + 1]
-                _update_call(nc, sides, n_faces, cell[lo:hi], faces, measure, flux, corr, dt, step, inv_volume[lo:hi],
-                             base[lo:hi], out[lo:hi])
-                c = take_chunk(counter)
-    return update_chunks

@@ -222,8 +222,7 @@ class ShapeFunctions:
         d = v.shape[1]
         mass, momentum = np.empty(self.n_nodes), np.empty((self.n_nodes, d))
         kernel = _mass_momentum(d)
-        self._over_nodes(lambda k, lo, hi, first, last: kernel(self.indptr, self.cols, self.values, m, v, first, last,
-                                                               lo, hi, mass, momentum))
+        self._over_nodes(kernel, (self.indptr, self.cols, self.values, m, v), (mass, momentum))
         return mass, momentum
 
     def grad_T_sum(self, X):
@@ -232,18 +231,18 @@ class ShapeFunctions:
         d = X.shape[1]
         out = np.empty((self.n_nodes, d))
         kernel = _grad_T_sum(d)
-        self._over_nodes(lambda k, lo, hi, first, last: kernel(self.indptr, self.cols, self.values, X, first, last,
-                                                               lo, hi, out))
+        self._over_nodes(kernel, (self.indptr, self.cols, self.values, X), (out,))
         return out
 
-    def _over_nodes(self, call):
-        """call(k, lo, hi, first, last) for the chunks of nodes lo:hi of the transposed pattern (the
-        particles first:last reach them), in parallel (`parallel.matmul_T`'s split)."""
+    def _over_nodes(self, kernel, before, after):
+        """kernel(*before, first, last, lo, hi, *after) for the chunks of nodes lo:hi of the
+        transposed pattern (the particles first:last reach them), in parallel (`parallel.matmul_T`'s
+        split)."""
         A = self.pattern_T
         if len(A.chunks) != len(parallel.chunks(A.n_cols)):
             raise ValueError("the thread count changed since the pattern was made")
-        k_of = {lo: k for k, (lo, _) in enumerate(A.chunks)}
-        parallel.rows(A.n_cols, lambda lo, hi: call(k_of[lo], lo, hi, A.first[k_of[lo]], A.last[k_of[lo]]))
+        parallel.chunked(A.n_cols, kernel, "w" * len(before) + "nnlh" + "w" * len(after),
+                         (*before, A.first, A.last, *after))
 
 
 @kernel_factory
@@ -313,8 +312,8 @@ def shape_functions(lattice, x, kind, lp=None, step=None, time=None, reuse=None,
         cols, W = np.empty((n, m ** d), np.int64), np.empty((1 + d, n, m ** d))   # W: S, then grad
     kernel, shape = _weights(d, m, int(F is not None)), np.array(lattice.shape, dtype=np.int64)
     F = _NO_STRETCH if F is None else F
-    bad = parallel.first_bad(n, lambda lo, hi: kernel(x[lo:hi], lp[lo:hi], F[lo:hi], lattice.origin, shape, lattice.h,
-                                                      lattice.node, cols[lo:hi], W[0, lo:hi], W[1:, lo:hi]))
+    bad = parallel.chunked(n, kernel, "rrrwwwwrrk",
+                           (x, lp, F, lattice.origin, shape, lattice.h, lattice.node, cols, W[0], W[1:]), "first")
     if bad >= 0:
         when = "" if step is None else f" at step {step}, t = {time:.6g} s"
         raise InstabilityError(

@@ -150,7 +150,7 @@ def tally(k, ok, J, lowest, speed, first, J_min, omega_min, fastest):
 
 def summarise(chunks, results):
     """`Health.summary` of a state from its chunks' (first bad, min J, smallest eigenvalue,
-    fastest wave) (`parallel.rows` results, in chunk order): the first bad point of the first
+    fastest wave) (`parallel.chunked`'s results, in chunk order): the first bad point of the first
     chunk that has one; the minima over the chunks (nan where no point is finite); the maximum
     (nan where a chunk's is)."""
     first = next((lo + r[0] for (lo, _), r in zip(chunks, results) if r[0] >= 0), -1)
@@ -209,6 +209,6 @@ def assess(materials, points, U, Q):
     laws, params = materials.laws                                        # built once per set
     finite, J, lowest, speed = np.empty(n, dtype=np.bool_), np.empty(n), np.empty(n), np.empty(n)
     material, kernel, rho = np.asarray(points.material, dtype=np.int64), _assess(d, only_law(laws)), materials.densities
-    results = parallel.rows(n, lambda lo, hi: kernel(U[lo:hi], Q[lo:hi], material[lo:hi], laws, params, rho,
-                                                     finite[lo:hi], J[lo:hi], lowest[lo:hi], speed[lo:hi]))
+    results = parallel.chunked(n, kernel, "rrrwwwrrrr", (U, Q, material, laws, params, rho, finite, J, lowest, speed),
+                               4)
     return Health(finite, J, lowest, speed, summarise(parallel.chunks(n), results))

@@ -24,7 +24,7 @@ def _combine(kernel, *arrays):
     flat = [np.ascontiguousarray(a).reshape(-1) for a in arrays]
     out = np.empty(arrays[0].shape)
     o = out.reshape(-1)
-    parallel.rows(len(o), lambda lo, hi: kernel(*(a[lo:hi] for a in flat), o[lo:hi]))
+    parallel.chunked(len(o), kernel, "r" * (len(flat) + 1), (*flat, o))
     return out
 
 

@@ -214,7 +214,7 @@ class Vectorise(event.Listener):
 # ---------------------------------------------------------------- one kernel per literal size
 def kernel_factory(factory=None, *, parallel=False):
     """``factory(*sizes)`` returns a Python function closing over the literal ``sizes`` (ints,
-    bools or None); the decorated name, called with the sizes, returns it compiled
+    bools, None or strings); the decorated name, called with the sizes, returns it compiled
     (``njit(cache=True, nogil=True)``: threads run it in parallel, `skdgmpm.parallel`), one kernel
     per distinct sizes, memoised. See the module's docstring. ``@kernel_factory(parallel=True)``:
     compiled with numba's ``parallel`` (a chunk loop over ``prange``, `kernel_call`)."""
@@ -228,6 +228,7 @@ def kernel_factory(factory=None, *, parallel=False):
             return kernels[sizes]
         except KeyError:
             k = kernels[sizes] = njit(cache=True, nogil=True, parallel=parallel)(factory(*sizes))
+            k.kernel_name = f"{factory.__module__}.{factory.__qualname__}{sizes!r}"
             return k
 
     kernel.kernels = kernels

@@ -259,7 +259,7 @@ class MPM(GodunovScheme):
         F_n, P_n = s.F, s.P
         s.F = np.empty_like(F_n)
         kernel = _deformation_update(self.d)
-        parallel.rows(len(F_n), lambda lo, hi: kernel(F_n[lo:hi], L[lo:hi], s.dt, s.F[lo:hi]))
+        parallel.chunked(len(F_n), kernel, "rrwr", (F_n, L, s.dt, s.F))
         s.P, s.history, s.health = self.materials.stress_update(s.F, self.particles.material, s.history, assess=True)
         s.work_constraints = self._constraint_work(s, F_n, P_n)
 
@@ -278,9 +278,8 @@ class MPM(GodunovScheme):
         v_imposed = np.where(self.constrained, s.v_grid, 0.0)
         power = np.empty(len(F_n))              # per particle, summed once (any thread count)
         sf, kernel = s.shape, _constraint_power(self.d)
-        parallel.rows(len(F_n), lambda lo, hi: kernel(sf.indptr[lo:hi + 1], sf.cols, sf.values, v_imposed, self.acting,
-                                                      self.particles.volume[lo:hi], P_n[lo:hi], s.P[lo:hi], F_n[lo:hi],
-                                                      power[lo:hi]))
+        parallel.chunked(len(F_n), kernel, "iwwwwrrrrr", (sf.indptr, sf.cols, sf.values, v_imposed, self.acting,
+                                                           self.particles.volume, P_n, s.P, F_n, power))
         return s.dt * float(np.sum(power))
 
     @staticmethod
@@ -290,7 +289,7 @@ class MPM(GodunovScheme):
         d = s.v.shape[1]
         L = np.empty((len(s.x), d, d))
         sf, kernel = s.shape, _gradient(d)
-        parallel.rows(len(L), lambda lo, hi: kernel(sf.indptr[lo:hi + 1], sf.cols, sf.values, v_grid, L[lo:hi]))
+        parallel.chunked(len(L), kernel, "iwwwr", (sf.indptr, sf.cols, sf.values, v_grid, L))
         return L
 
     @stage
@@ -299,8 +298,7 @@ class MPM(GodunovScheme):
         body forces and the boundary tractions (at mid-step) carried by the particles."""
         tau = np.empty_like(s.P)                        # sigma V = P F^T V0 (n, d, d)
         kernel = _kirchhoff(self.d)
-        parallel.rows(len(tau), lambda lo, hi: kernel(s.P[lo:hi], s.F[lo:hi], self.particles.volume[lo:hi],
-                                                      tau[lo:hi]))
+        parallel.chunked(len(tau), kernel, "rrrr", (s.P, s.F, self.particles.volume, tau))
         s.force = -s.shape.grad_T_sum(tau)
         if self.body_force is None and not self.tractions:
             s.external = np.zeros_like(s.force)
@@ -335,8 +333,8 @@ class MPM(GodunovScheme):
         if moving:
             x = np.empty(s.x.shape)
         kernel = _particle_update(self.d, int(moving))    # both sums in one pass (matmul's bits, then + dt *)
-        parallel.rows(len(v), lambda lo, hi: kernel(sf.indptr[lo:hi + 1], sf.cols, sf.values, s.a, s.v_grid, s.dt,
-                                                     s.v[lo:hi], s.x[lo:hi], v[lo:hi], x[lo:hi]))
+        parallel.chunked(len(v), kernel, "iwwwwwrrrr",
+                         (sf.indptr, sf.cols, sf.values, s.a, s.v_grid, s.dt, s.v, s.x, v, x))
         s.v, s.x = v, x
 
     @stage
@@ -348,7 +346,7 @@ class MPM(GodunovScheme):
     def _per_mass(s, nodal):
         """nodal / m_i on nodes with mass, zero elsewhere (a pass on the threads)."""
         out = np.empty(nodal.shape)
-        parallel.rows(len(out), lambda lo, hi: _per_mass(nodal[lo:hi], s.mass[lo:hi], s.filled[lo:hi], out[lo:hi]))
+        parallel.chunked(len(out), _per_mass, "rrrr", (nodal, s.mass, s.filled, out))
         return out
 
     # ---------------------------------------------------------------- driver-facing
@@ -361,7 +359,7 @@ class MPM(GodunovScheme):
             return min(self.cfl * self.h_min / c, dt_max)
         _, v = system.split(state.Q, self.d)
         kernel = _fastest(self.d)
-        chunks = parallel.rows(len(v), lambda lo, hi: kernel(state.speed[lo:hi], v[lo:hi]))
+        chunks = parallel.chunked(len(v), kernel, "rr", (state.speed, v), 1)[:, 0].tolist()
         fastest = np.nan if any(c != c for c in chunks) else max(chunks)        # max is exact: any thread count
         return min(self.cfl * self.h_min / fastest, dt_max)
 

@@ -7,11 +7,11 @@ Every pass that is chunked computes each row from its inputs alone and writes th
 scatter into another row, no running sum over rows): a row's value does not depend on which
 chunk, or which thread, computes it, so the results are bit-identical for any thread count. A
 sum over rows (e.g. the transverse corrections an edge receives from its neighbours) is made a
-gather of its own, each row summing its terms in a fixed order. The kernels are compiled with
-``nogil`` (`kernel_cache.kernel_factory`): Python threads run them in parallel.
+gather of its own, each row summing its terms in a fixed order. A pass names its kernel, how
+each argument is cut per chunk and what the chunks return (`chunked`):
 
     out = np.empty(...)
-    parallel.rows(n, lambda lo, hi: kernel(rows(a, lo, hi), csr_rows(T, lo, hi), out[lo:hi]))
+    parallel.chunked(n, kernel, "rcw", (a, T, out))     # kernel(a[lo:hi], csr_rows(T, lo, hi), out) per chunk
 
 Sparse products: `matmul` (CSR times dense, each output row its own sum, in CSR order, as
 scipy's product sums it) is the one product every step uses; a transposed product A^T X is a
@@ -20,17 +20,18 @@ order of A's rows, as scipy's A.T @ X visits them), so a scatter into rows becom
 the same bits; where A changes every step (MPM's shape functions), `matmul_T` applies A^T
 without storing it, each chunk of output rows scattering into its own rows only.
 
-Compiled chunk loops: DGMPM with one particle per cell runs its Euler step's chunked passes (faces,
-cells' corrections, boundary faces, update, law's pass) over the same chunks from a numba ``prange``
-(`compiled_chunks`, the loops in `dgmpm_kernels` and `constitutive`, each reaching its kernel
-through `kernel_cache.kernel_call`) where numba's threading layer is OpenMP or TBB: its threads
-take their chunks without the GIL and without waking from the OS, where each worker of the pool
-below wakes and takes the GIL (docs/bench/session20.md). numba deals a ``prange`` out in equal
-shares, so each of its threads takes the next chunk left from a counter (`take_chunk`, an atomic
-add), as the pool's threads do: a core the host slows takes fewer chunks
-(docs/bench/session25.md). The same chunks and kernels: the same bits. All the passes of that
-step go one way, so that numba's waiting threads, which spin a while, never hold a core that a
-worker of the pool needs.
+Compiled chunk loops: every method's chunked passes run over their chunks from a numba ``prange``
+(`compiled_chunks`: one loop for every pass, `_chunk_loop`, which writes each kernel's call out
+once from its spec; DGMPM's face and law's passes, whose rows are cut by a flag, have loops of
+their own in `dgmpm_kernels` and `constitutive`, reaching their kernels through `kernel_cache.
+kernel_call`) where numba's threading layer is OpenMP or TBB: its threads take their chunks
+without the GIL and without waking from the OS, where each worker of the pool below wakes and
+takes the GIL (docs/bench/session20.md). numba deals a ``prange`` out in equal shares, so each of
+its threads takes the next chunk left from a counter (`take_chunk`, an atomic add), as the pool's
+threads do: a core the host slows takes fewer chunks (docs/bench/session25.md). The same chunks
+and kernels: the same bits. Every pass of a step goes one way, so that numba's waiting threads,
+which spin a while, never hold a core that a worker of the pool needs; the pool runs them where
+numba's layer is another (`rows`), and the bench's probes.
 
 The thread count: `set_threads` (the scene key ``run.threads``, ``skdgmpm run --threads``), else
 $SKDGMPM_THREADS, else every core this process may use. A loop shorter than `MIN_ROWS` per thread
@@ -46,7 +47,7 @@ import numba
 import numpy as np
 from numba import njit, prange, types
 from numba.core import cgutils
-from numba.extending import intrinsic
+from numba.extending import intrinsic, overload
 
 from .kernel_cache import kernel_factory, scratch
 
@@ -124,12 +125,11 @@ def chunks(n, min_rows=None):
     return bounds(n, 1 if t == 1 else min(t * PIECES, n // max(1, (min_rows or MIN_ROWS) // PIECES)))
 
 
-def rows(n, call):
-    """``call(lo, hi)`` over contiguous chunks of range(n), in parallel, each thread taking the
-    next chunk not yet taken until none is left; returns the results in chunk order (the first
-    chunk's first)."""
-    parts = chunks(n)
-    return _run(call, parts, team(n))
+def rows(n, call, min_rows=None):
+    """``call(lo, hi)`` over contiguous chunks of range(n) (`chunks`), in parallel, each thread
+    taking the next chunk not yet taken until none is left; returns the results in chunk order
+    (the first chunk's first)."""
+    return _run(call, chunks(n, min_rows), team(n, min_rows))
 
 
 def each_thread(n, call):
@@ -274,6 +274,170 @@ def _start_layer(x):
         x[i] = i
 
 
+def chunked(n, kernel, spec, args, returns=0, min_rows=None):
+    """``kernel`` (compiled) over the chunks of range(n) (`chunks`), in parallel, the same bits
+    for any thread count: on each chunk (lo, hi) it is called with ``args`` as ``spec`` says, one
+    letter a parameter: ``r`` the argument's rows lo:hi, ``i`` its entries lo:hi + 1 (an
+    indptr), ``c`` a CSR triple's rows (`csr_rows`), ``k`` its columns lo:hi, ``n`` its entry of
+    the chunk (the chunk's number in `chunks`), ``w`` the argument whole, ``l`` and ``h`` lo and
+    hi themselves (no argument taken); letters in brackets, a tuple
+    argument, each of its items as its letter says (``(rrw)``). A compiled chunk loop runs
+    the chunks where numba can (`compiled_chunks`), `rows` where not. ``returns``: 0 (what the
+    kernel returns is dropped; returns None), ``"first"`` (the kernel returns its chunk's first
+    failing row or -1; returns the first failing row of range(n), or -1, as one serial pass
+    would) or k > 0 (the kernel returns k numbers, a tuple where k > 1; returns them, an array
+    (chunks, k) of floats in chunk order). ``min_rows``: as `chunks` has it."""
+    width = 1 if returns == "first" else returns
+    bounds = compiled_chunks(n, min_rows)
+    if bounds is None:
+        parsed, number = _parsed(spec), {lo: c for c, (lo, _) in enumerate(chunks(n, min_rows))}
+        results = rows(n, lambda lo, hi: kernel(*_sliced(parsed, args, lo, hi, number[lo])), min_rows)
+        if returns == "first":
+            return next((lo + b for (lo, _), b in zip(chunks(n, min_rows), results) if b >= 0), -1)
+        return np.array(results, float).reshape(len(results), width) if width else None
+    leaves = []
+    shape = _shape(args, leaves)
+    key = f"{kernel_name(kernel)}:{spec}:{shape}:{returns}"
+    _CHUNK_KERNELS[key] = kernel, spec, shape, returns
+    out = np.empty((len(bounds) - 1, width))
+    _chunk_loop(key)(bounds, out, tuple(leaves))
+    if returns == "first":
+        return next((int(b) for b in out[:, 0] if b >= 0), -1)
+    return out if width else None
+
+
+def kernel_name(kernel):
+    """A compiled kernel's name, the same in every process: its module and name, and the sizes
+    of a `kernel_cache.kernel_factory`'s kernel (a closure made otherwise has no name of its own:
+    refused)."""
+    name = getattr(kernel, "kernel_name", None) or f"{kernel.py_func.__module__}.{kernel.py_func.__qualname__}"
+    if "<locals>" in name:
+        raise ValueError(f"chunked: {name} is not a module's kernel nor a kernel_factory's")
+    return name
+
+
+_SLICES = {"r": "{a}[lo:hi]", "i": "{a}[lo:hi + 1]", "k": "{a}[:, lo:hi]", "n": "{a}[c]", "w": "{a}", "c": None}
+
+
+@functools.lru_cache(maxsize=None)
+def _parsed(spec, letters=tuple(_SLICES) + ("l", "h")):
+    """A `chunked` spec (or an arguments' `_shape`, its letters ``.``) as a tuple of letters and
+    tuples (the bracketed groups)."""
+    stack = [[]]
+    for letter in spec:
+        if letter == "(":
+            stack.append([])
+        elif letter == ")" and len(stack) > 1:
+            group = tuple(stack.pop())
+            stack[-1].append(group)
+        elif letter in letters:
+            stack[-1].append(letter)
+        else:
+            raise ValueError(f"chunked: spec {spec!r}: {letter!r} unknown or unmatched")
+    if len(stack) != 1:
+        raise ValueError(f"chunked: spec {spec!r}: a bracket not closed")
+    return tuple(stack[0])
+
+
+def _shape(args, leaves):
+    """The nesting of the tuple ``args`` as text, ``.`` an item that is not a tuple, its tuples in
+    brackets; its items that are not tuples appended to ``leaves``, in order. numba's compiled
+    chunk loop takes a tuple of arrays and numbers, not of tuples (a tuple inside is refused
+    when the loop is made), so its arguments travel flat and are put back together per chunk."""
+    text = []
+    for a in args:
+        if isinstance(a, tuple):
+            text.append(f"({_shape(a, leaves)})")
+        else:
+            leaves.append(a)
+            text.append(".")
+    return "".join(text)
+
+
+def _sliced(spec, args, lo, hi, c):
+    """The arguments of chunk c (`chunked`), in Python (``spec`` as `_parsed` gives it)."""
+    out, taken = [], iter(args)
+    for letter in spec:
+        if letter in ("l", "h"):
+            out.append(lo if letter == "l" else hi)
+            continue
+        a = next(taken)
+        out.append(tuple(_sliced(letter, a, lo, hi, c)) if isinstance(letter, tuple) else a[lo:hi] if letter == "r"
+                   else a[lo:hi + 1] if letter == "i" else csr_rows(a, lo, hi) if letter == "c"
+                   else a[:, lo:hi] if letter == "k" else a[c] if letter == "n" else a)
+    return out
+
+
+def _sliced_code(spec, shape, leaves):
+    """The arguments of a chunk (`chunked`) as compiled code, from the loop's flat tuple ``args``:
+    ``spec`` and the arguments' ``shape`` as `_parsed` gives them, ``leaves`` the numbers of the
+    flat items in order (an iterator)."""
+    parts, shapes = [], iter(shape)
+    for letter in spec:
+        if letter in ("l", "h"):
+            parts.append("lo" if letter == "l" else "hi")
+            continue
+        parts.append(_argument_code(letter, next(shapes), leaves))
+    return ", ".join(parts)
+
+
+def _argument_code(letter, shape, leaves):
+    """One argument of a chunk as compiled code (`_sliced_code`)."""
+    if isinstance(letter, tuple) or (letter in ("w", "c") and shape != "."):
+        if isinstance(letter, tuple) and len(letter) != len(shape) or letter == "c" and len(shape) != 3:
+            raise ValueError(f"chunked: {letter!r} given a tuple of {len(shape)}")
+        if letter == "c":
+            indptr, indices, data = (f"args[{next(leaves)}]" for _ in range(3))
+            return f"({indptr}[lo:hi + 1], {indices}, {data})"
+        items = letter if isinstance(letter, tuple) else ("w",) * len(shape)
+        return "(" + "".join(f"{_argument_code(k, s, leaves)}, " for k, s in zip(items, shape)) + ")"
+    if shape != ".":
+        raise ValueError(f"chunked: {letter!r} given a tuple")
+    return _SLICES[letter].format(a=f"args[{next(leaves)}]")
+
+
+_CHUNK_KERNELS = {}             # key of a `chunked` loop -> (kernel, spec, shape, returns), for its typing
+
+
+def _chunk_call(key, lo, hi, c, out, args):
+    raise TypeError("_chunk_call is for compiled code")
+
+
+@overload(_chunk_call)
+def _chunk_call_typed(key, lo, hi, c, out, args):
+    """The call of a `chunked` loop's kernel on chunk c = (lo, hi), its arguments sliced as its
+    spec says and what it returns written into out[c], written out as code once per key (a
+    string literal: the kernel, its spec and returns, `_CHUNK_KERNELS`)."""
+    if not isinstance(key, types.StringLiteral):
+        return None                     # not literal: typed again with the literal
+    kernel, spec, shape, returns = _CHUNK_KERNELS[key.literal_value]
+    call = f"kernel({_sliced_code(_parsed(spec), _parsed(shape, ('.',)), iter(range(len(args))))})"
+    if returns == "first":
+        body = f"b = {call}\n    out[c, 0] = lo + b if b >= 0 else -1"
+    elif returns == 1:
+        body = f"out[c, 0] = {call}"
+    elif returns:
+        body = f"r = {call}\n" + "".join(f"    out[c, {j}] = r[{j}]\n" for j in range(returns))
+    else:
+        body = call
+    namespace = {"kernel": kernel}
+    exec(f"def chunk_call(key, lo, hi, c, out, args):\n    {body}\n", namespace)
+    return namespace["chunk_call"]
+
+
+@kernel_factory(parallel=True)
+def _chunk_loop(key):                   # key: a string literal, `_chunk_call`'s
+    def chunk_loop(bounds, out, args):
+        n = len(bounds) - 1
+        counter = np.zeros(1, np.int64)
+        for _ in prange(n):                 # each thread takes chunks until none is left
+            c = take_chunk(counter)
+            while c < n:
+                _chunk_call(key, bounds[c], bounds[c + 1], c, out, args)
+                c = take_chunk(counter)
+    return chunk_loop
+
+
 def first_bad(n, call):
     """`rows` for a pass that returns the first failing row of its chunk (or -1): the first
     failing row of range(n), or -1 (the same as one serial pass would return)."""
@@ -289,7 +453,7 @@ def add_scaled(x, a, y, out=None):
     views (a column block of a state array); into ``out`` (contiguous) if given."""
     out = np.empty(x.shape) if out is None else out
     x2, y2, out2 = x.reshape(len(x), -1), y.reshape(len(y), -1), out.reshape(len(out), -1)
-    rows(len(out), lambda lo, hi: _add_scaled(x2[lo:hi], float(a), y2[lo:hi], out2[lo:hi]))
+    chunked(len(out), _add_scaled, "rwrr", (x2, float(a), y2, out2))
     return out
 
 
@@ -305,7 +469,7 @@ def take_rows(X, index, out):
     such rows (C order, any leading shape), in parallel chunks: a gather (e.g. particles into
     padded slots), copies only."""
     X2, out2 = X.reshape(len(X), -1), out.reshape(len(index), -1)
-    rows(len(index), lambda lo, hi: _take_rows(X2, index[lo:hi], out2[lo:hi]))
+    chunked(len(index), _take_rows, "wrr", (X2, index, out2))
     return out
 
 
@@ -360,7 +524,7 @@ def matmul(A, X, out=None, add=False, scale=None):
     X2, out2 = (X[:, None], out[:, None]) if vector else (X, out)
     kernel = _matmul(X2.shape[1] if X2.shape[1] <= SCRATCH_WIDTH else None, int(scale is not None))
     s = _NONE if scale is None else np.asarray(scale, dtype=float)
-    rows(n, lambda lo, hi: kernel(indptr[lo:hi + 1], indices, data, s, X2, add, out2[lo:hi]))
+    chunked(n, kernel, "iwwwwwr", (indptr, indices, data, s, X2, add, out2))
     return out
 
 
@@ -416,8 +580,7 @@ class Transposed:
         parts = chunks(n)
         first = np.full((len(parts), len(self.chunks)), n, np.int64)     # per chunk of A's rows
         last = np.zeros((len(parts), len(self.chunks)), np.int64)
-        index = {lo: k for k, (lo, _) in enumerate(parts)}
-        rows(n, lambda lo, hi: _row_ranges(indptr[lo:hi + 1], indices, lo, starts, first[index[lo]], last[index[lo]]))
+        chunked(n, _row_ranges, "iwlwnn", (indptr, indices, starts, first, last))
         self.first, self.last = first.min(axis=0), last.max(axis=0)
 
 
@@ -438,9 +601,7 @@ def matmul_T(A, data, X, out=None, add=False, scale=None):
     s = _NONE if scale is None else np.asarray(scale, dtype=float)
     if len(A.chunks) != len(chunks(A.n_cols)):
         raise ValueError("matmul_T: the thread count changed since the pattern was made")
-    k_of = {lo: k for k, (lo, _) in enumerate(A.chunks)}
-    rows(A.n_cols, lambda lo, hi: kernel(A.indptr, A.indices, data, s, X2, A.first[k_of[lo]], A.last[k_of[lo]],
-                                         lo, hi, add, out2))
+    chunked(A.n_cols, kernel, "wwwwwnnlhww", (A.indptr, A.indices, data, s, X2, A.first, A.last, add, out2))
     return out
 
 

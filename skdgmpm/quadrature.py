@@ -252,8 +252,7 @@ class ParticleMap:
             out = np.empty((self.P2G.shape[0], U.shape[1])), np.empty((self.P2G.shape[0], Q.shape[1]))
         U_n, Q_n = out
         A, kernel = self.P2G, _project_state(d)
-        parallel.rows(len(U_n), lambda lo, hi: kernel(A.indptr[lo:hi + 1], A.indices, A.data, U, Q, self.rho[lo:hi],
-                                                      U_n[lo:hi], Q_n[lo:hi]))
+        parallel.chunked(len(U_n), kernel, "iwwwwrrr", (A.indptr, A.indices, A.data, U, Q, self.rho, U_n, Q_n))
         return U_n, Q_n
 
     def interpolate(self, nodal):

@@ -191,9 +191,8 @@ def godunov_fluxes(Q_L, C_L, rho_L, Q_R, C_R, rho_R, N):
     faces: traction, both impedances, `godunov_state`, flux. Returns three (nf, d*d + d) arrays."""
     flux, fluct_L, fluct_R = np.empty_like(Q_L), np.empty_like(Q_L), np.empty_like(Q_L)
     rho_L, rho_R, kernel = np.asarray(rho_L, dtype=float), np.asarray(rho_R, dtype=float), _godunov_fluxes(N.shape[1])
-    bad = parallel.first_bad(len(N), lambda lo, hi: kernel(
-        Q_L[lo:hi], C_L[lo:hi], rho_L[lo:hi], Q_R[lo:hi], C_R[lo:hi], rho_R[lo:hi], N[lo:hi], flux[lo:hi],
-        fluct_L[lo:hi], fluct_R[lo:hi]))
+    bad = parallel.chunked(len(N), kernel, "rrrrrrrrrr", (Q_L, C_L, rho_L, Q_R, C_R, rho_R, N, flux, fluct_L, fluct_R),
+                           "first")
     if bad >= 0:
         _not_hyperbolic(bad)
     return flux, fluct_L, fluct_R
@@ -206,11 +205,10 @@ def trace_fluxes(T_L, T_R, U, Q, rho_L, rho_R, N, mat_L, mat_R, laws, params, fl
     trace of U with densities rho_L, rho_R (nf,), or, if Q (n_dofs, nc) is given, its trace (a
     law with history, which lives at the points only); the tangent at the trace of F. The same
     numbers as `godunov_fluxes` on the traced face states, bit for bit."""
-    kernel, csr = _trace_fluxes(N.shape[1], int(Q is not None), only_law(laws)), parallel.csr_rows
+    kernel = _trace_fluxes(N.shape[1], int(Q is not None), only_law(laws))
     Q = U if Q is None else Q
-    bad = parallel.first_bad(len(N), lambda lo, hi: kernel(
-        csr(T_L, lo, hi), csr(T_R, lo, hi), U, Q, rho_L[lo:hi], rho_R[lo:hi], N[lo:hi], mat_L[lo:hi], mat_R[lo:hi],
-        laws, params, flux[lo:hi]))
+    bad = parallel.chunked(len(N), kernel, "ccwwrrrrrwwr", (T_L, T_R, U, Q, rho_L, rho_R, N, mat_L, mat_R, laws, params,
+                                                          flux), "first")
     if bad >= 0:
         _not_hyperbolic(bad)
     return flux

@@ -28,7 +28,7 @@ def join(T, v):
     n, d = v.shape
     out, T = np.empty((n, d * d + d)), T.reshape(n, d, d)
     kernel = _join(d)
-    parallel.rows(n, lambda lo, hi: kernel(T[lo:hi], v[lo:hi], out[lo:hi]))
+    parallel.chunked(n, kernel, "rrr", (T, v, out))
     return out
 
 
@@ -76,7 +76,7 @@ def embed(F):
     n, d = len(F), F.shape[1]
     F3, F = np.empty((n, 3, 3)), np.reshape(F, (n, d * d))
     kernel = _embed(d)
-    parallel.rows(n, lambda lo, hi: kernel(F[lo:hi], F3[lo:hi]))
+    parallel.chunked(n, kernel, "rr", (F, F3))
     return F3
 
 
@@ -152,5 +152,5 @@ def volume_flux(Q, stiffness, out=None):
         stiffness = Stiffness(stiffness)
     R = np.empty((stiffness.shape[0], Q.shape[1])) if out is None else out
     (indptr, indices, data), kernel, add = stiffness, _volume_flux(len(stiffness[2])), out is not None
-    parallel.rows(len(R), lambda lo, hi: kernel(Q, indptr[lo:hi + 1], indices, data, add, R[lo:hi]))
+    parallel.chunked(len(R), kernel, "wiwwwr", (Q, indptr, indices, data, add, R))
     return R

@@ -69,10 +69,13 @@ def test_bits_do_not_depend_on_the_thread_count(name, monkeypatch):
             assert np.array_equal(one.history, other.history)
 
 
-def test_one_particle_per_cell_steps_in_compiled_chunk_loops(monkeypatch):
-    """DGMPM with one particle per cell runs its step's chunked passes (faces, cells' corrections,
-    boundary faces, update, law's pass) in numba's compiled chunk loops (`parallel.compiled_chunks`), none on the
-    pool, where numba's threading layer is OpenMP or TBB; the states have the pool's bits."""
+@pytest.mark.parametrize("name", ["dgmpm-ctu", "dgmpm-dcu-rk2", "rk-dgfem-1", "ader-dgfem-2", "ader-dgmpm-1",
+                                  "mpm-usl-hat", "mpm-usf-cpgimp"])
+def test_every_pass_of_a_step_runs_in_compiled_chunk_loops(name, monkeypatch):
+    """Every method's step runs its chunked passes in numba's compiled chunk loops (`parallel.
+    chunked`, `parallel.compiled_chunks`), none on the pool, where numba's threading layer is
+    OpenMP or TBB; the states have the pool's bits (the pool runs them all where the compiled
+    loops are refused)."""
     monkeypatch.setattr(parallel, "MIN_ROWS", 16)
     if not parallel._compiled_layer():
         pytest.skip(f"numba's threading layer here is {parallel.numba.threading_layer()}: the pool runs the passes")
@@ -83,15 +86,16 @@ def test_one_particle_per_cell_steps_in_compiled_chunk_loops(monkeypatch):
             if not compiled:
                 monkeypatch.setattr(parallel, "compiled_chunks", lambda n, min_rows=None: None)
             parallel.set_threads(2)
-            scene, overrides = CASES["dgmpm-ctu"]
+            scene, overrides = CASES[name]
             disc = build(load_scene(scene, overrides))
-            state = disc.stepper.step(disc.initial)         # the first step records its cells on the pool
+            state = disc.stepper.step(disc.initial)
             pooled = []
-            monkeypatch.setattr(parallel, "rows", lambda n, call: pooled.append(n) or rows(n, call))
+            monkeypatch.setattr(parallel, "rows", lambda n, call, min_rows=None: pooled.append(n) or rows(n, call,
+                                                                                                         min_rows))
             for _ in range(STEPS - 1):
                 state = disc.stepper.step(state)
             monkeypatch.setattr(parallel, "rows", rows)
-            assert (pooled == []) == compiled
+            assert (pooled == []) == compiled, pooled
             states.append(state)
     finally:
         parallel.set_threads(None)
