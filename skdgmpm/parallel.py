@@ -38,6 +38,8 @@ $SKDGMPM_THREADS, else every core this process may use. A loop shorter than `MIN
 runs in the calling thread (small scenes pay nothing); study workers run one thread each.
 """
 import functools
+import hashlib
+import inspect
 import itertools
 import os
 import threading
@@ -287,10 +289,12 @@ def chunked(n, kernel, spec, args, returns=0, min_rows=None):
     failing row or -1; returns the first failing row of range(n), or -1, as one serial pass
     would) or k > 0 (the kernel returns k numbers, a tuple where k > 1; returns them, an array
     (chunks, k) of floats in chunk order). ``min_rows``: as `chunks` has it."""
-    width = 1 if returns == "first" else returns
+    width, parsed = (1 if returns == "first" else returns), _parsed(spec)
+    if sum(letter not in ("l", "h") for letter in parsed) != len(args):
+        raise ValueError(f"chunked: spec {spec!r} for {len(args)} arguments")
     bounds = compiled_chunks(n, min_rows)
     if bounds is None:
-        parsed, number = _parsed(spec), {lo: c for c, (lo, _) in enumerate(chunks(n, min_rows))}
+        number = {lo: c for c, (lo, _) in enumerate(chunks(n, min_rows))}
         results = rows(n, lambda lo, hi: kernel(*_sliced(parsed, args, lo, hi, number[lo])), min_rows)
         if returns == "first":
             return next((lo + b for (lo, _), b in zip(chunks(n, min_rows), results) if b >= 0), -1)
@@ -308,9 +312,15 @@ def chunked(n, kernel, spec, args, returns=0, min_rows=None):
 
 def kernel_name(kernel):
     """A compiled kernel's name, the same in every process: its module and name, and the sizes
-    of a `kernel_cache.kernel_factory`'s kernel (a closure made otherwise has no name of its own:
-    refused)."""
-    name = getattr(kernel, "kernel_name", None) or f"{kernel.py_func.__module__}.{kernel.py_func.__qualname__}"
+    of a `kernel_cache.kernel_factory`'s kernel; outside this package, a hash of its source too
+    (the chunk loops are cached under this package's sources only). A closure made otherwise has
+    no name of its own: refused."""
+    name = getattr(kernel, "kernel_name", None)
+    if name is None:
+        func = kernel.py_func
+        name = f"{func.__module__}.{func.__qualname__}"
+        if not name.startswith(__name__.rpartition(".")[0] + "."):
+            name += "#" + hashlib.sha256(inspect.getsource(func).encode()).hexdigest()[:16]
     if "<locals>" in name:
         raise ValueError(f"chunked: {name} is not a module's kernel nor a kernel_factory's")
     return name

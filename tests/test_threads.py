@@ -226,6 +226,78 @@ def test_each_thread_runs_its_chunk_on_a_thread_of_its_own():
         parallel.set_threads(None)
 
 
+@numba.njit(nogil=True)
+def _spec_probe(lo, hi, a, indptr, csr, cols, per_chunk, pair, scalar, out):
+    """What each argument of a chunk holds (`parallel.chunked`'s letters), into out's rows; the
+    chunk's first negative a, or -1."""
+    first = -1
+    for r in range(hi - lo):
+        out[r, 0] = a[r] + scalar
+        out[r, 1] = (indptr[r + 1] - indptr[r]) + 10 * (csr[0][r + 1] - csr[0][r]) + 100 * len(csr[1])
+        out[r, 2] = cols[1, r]
+        out[r, 3] = per_chunk
+        out[r, 4] = pair[0][r] * pair[1][1]
+        out[r, 5] = lo
+        if a[r] < 0 and first < 0:
+            first = r
+    return first
+
+
+@numba.njit(nogil=True)
+def _chunk_sum(a):
+    s = 0.0
+    for x in a:
+        s += x
+    return s, len(a)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_chunked_cuts_each_argument_as_its_spec_says(compiled, monkeypatch):
+    """`parallel.chunked` on three threads, the loop compiled (numba's threads) or on the pool:
+    each letter's cut of each chunk (rows, indptr rows, a CSR triple's rows, columns, the
+    chunk's entry, a tuple's items, whole, lo and hi), the first failing row over the chunks,
+    and each chunk's returned numbers in chunk order, as numpy computes them from the chunks.
+    (The test's kernels are named with a hash of their source: the loops cached on disk are
+    the package's, `parallel.kernel_name`.)"""
+    if compiled and not parallel._compiled_layer():
+        pytest.skip("no compiled chunk loops here")
+    monkeypatch.setattr(parallel, "MIN_ROWS", 8)
+    if not compiled:
+        monkeypatch.setattr(parallel, "compiled_chunks", lambda n, min_rows=None: None)
+    n = 100
+    rng = np.random.default_rng(3)
+    a, b = rng.random(n), rng.random(n)
+    indptr = np.concatenate([[0], np.cumsum(rng.integers(0, 4, n))]).astype(np.int32)
+    csr = (indptr, np.zeros(indptr[-1], np.int32), np.zeros(indptr[-1]))
+    cols = rng.random((3, n))
+    try:
+        parallel.set_threads(3)
+        parts = parallel.chunks(n)
+        assert len(parts) > 3
+        chunk_of = np.concatenate([np.full(hi - lo, k) for k, (lo, hi) in enumerate(parts)])
+        lo_of = np.concatenate([np.full(hi - lo, lo) for lo, hi in parts])
+        for bad, first in (([], -1), ([57, 23, 90], 23)):
+            a[bad] = -1.0
+            out = np.full((n, 6), np.nan)
+            got = parallel.chunked(n, _spec_probe, "lhrickn(rw)wr",
+                                   (a, indptr, csr, cols, np.arange(len(parts)) * 1.5, (b, a), 0.25, out), "first")
+            assert got == first
+            assert np.array_equal(out[:, 0], a + 0.25)
+            assert np.array_equal(out[:, 1], np.diff(indptr) * 11 + 100 * len(csr[1]))
+            assert np.array_equal(out[:, 2], cols[1])
+            assert np.array_equal(out[:, 3], chunk_of * 1.5)
+            assert np.array_equal(out[:, 4], b * a[1])
+            assert np.array_equal(out[:, 5], lo_of)
+        sums = parallel.chunked(n, _chunk_sum, "r", (b,), 2)
+        assert np.array_equal(sums, [[sum(b[lo:hi].tolist()), hi - lo] for lo, hi in parts])
+        with pytest.raises(ValueError, match="'x' unknown"):
+            parallel.chunked(n, _chunk_sum, "x", (b,))
+        with pytest.raises(ValueError, match="for 2 arguments"):
+            parallel.chunked(n, _chunk_sum, "r", (b, b))
+    finally:
+        parallel.set_threads(None)
+
+
 def test_first_bad_is_the_serial_answer(monkeypatch):
     monkeypatch.setattr(parallel, "MIN_ROWS", 4)
     bad = np.zeros(40, bool)
