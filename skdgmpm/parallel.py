@@ -304,7 +304,9 @@ def chunked(n, kernel, spec, args, returns=0, min_rows=None):
     key = f"{kernel_name(kernel)}:{spec}:{shape}:{returns}"
     _CHUNK_KERNELS[key] = kernel, spec, shape, returns
     out = np.empty((len(bounds) - 1, width))
-    _chunk_loop(key)(bounds, out, tuple(leaves))
+    if len(leaves) > LEAVES:
+        raise ValueError(f"chunked: {len(leaves)} arrays and numbers, more than {LEAVES}")
+    _chunk_loop(key)(bounds, out, *leaves, *(0,) * (LEAVES - len(leaves)))
     if returns == "first":
         return next((int(b) for b in out[:, 0] if b >= 0), -1)
     return out if width else None
@@ -351,9 +353,9 @@ def _parsed(spec, letters=tuple(_SLICES) + ("l", "h")):
 
 def _shape(args, leaves):
     """The nesting of the tuple ``args`` as text, ``.`` an item that is not a tuple, its tuples in
-    brackets; its items that are not tuples appended to ``leaves``, in order. numba's compiled
-    chunk loop takes a tuple of arrays and numbers, not of tuples (a tuple inside is refused
-    when the loop is made), so its arguments travel flat and are put back together per chunk."""
+    brackets; its items that are not tuples appended to ``leaves``, in order. The compiled chunk
+    loop takes them as parameters of their own (`_chunk_loop`) and puts the tuples back together
+    per chunk."""
     text = []
     for a in args:
         if isinstance(a, tuple):
@@ -435,15 +437,24 @@ def _chunk_call_typed(key, lo, hi, c, out, args):
     return namespace["chunk_call"]
 
 
+LEAVES = 32             # the arrays and numbers a `chunked` pass may take, its tuples' items counted
+
+
 @kernel_factory(parallel=True)
 def _chunk_loop(key):                   # key: a string literal, `_chunk_call`'s
-    def chunk_loop(bounds, out, args):
+    def chunk_loop(bounds, out, a0, a1, a2, a3, a4, a5, a6, a7, a8, a9, a10, a11, a12, a13, a14, a15, a16, a17,
+                   a18, a19, a20, a21, a22, a23, a24, a25, a26, a27, a28, a29, a30, a31):
+        # each array a parameter of its own: a tuple of tuples is refused in a prange, and a tuple
+        # of arrays of several kinds handed to numba's threads as one value corrupted the heap
+        # (free(): invalid next size, a DCU step after a CTU one; tests/test_threads.py)
         n = len(bounds) - 1
         counter = np.zeros(1, np.int64)
         for _ in prange(n):                 # each thread takes chunks until none is left
             c = take_chunk(counter)
             while c < n:
-                _chunk_call(key, bounds[c], bounds[c + 1], c, out, args)
+                _chunk_call(key, bounds[c], bounds[c + 1], c, out,
+                            (a0, a1, a2, a3, a4, a5, a6, a7, a8, a9, a10, a11, a12, a13, a14, a15, a16, a17, a18,
+                             a19, a20, a21, a22, a23, a24, a25, a26, a27, a28, a29, a30, a31))
                 c = take_chunk(counter)
     return chunk_loop
 

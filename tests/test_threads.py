@@ -298,6 +298,35 @@ def test_chunked_cuts_each_argument_as_its_spec_says(compiled, monkeypatch):
         parallel.set_threads(None)
 
 
+def test_a_dcu_step_after_a_ctu_step_on_three_threads_keeps_the_heap_whole():
+    """The compiled chunk loop once took its arguments as one tuple of arrays of several kinds:
+    a CTU simulation on three threads, then a DCU one on two, aborted the process when the second
+    was freed (free(): invalid next size). Now each array is a parameter of the loop: the same
+    sequence, in a process of its own, ends cleanly."""
+    import subprocess
+    import sys
+    code = """
+import gc
+from skdgmpm import bench, parallel
+from skdgmpm.build import build
+parallel.MIN_ROWS = 16
+parallel.set_threads(3)
+bench.measure_threads_here("dgmpm-ctu", 8, [1, 2], steps=3, warmup=1)
+bench.alternate_threads(build(bench.scene_for("dgmpm-ctu", 8)), [1, 2], 4, warmup=1)
+parallel.set_threads(1)
+disc = build(bench.scene_for("dgmpm-dcu", 32))
+step = bench.Stepping(disc)
+bench._use_threads(2)
+for _ in range(6):
+    step()
+del disc, step
+gc.collect()
+print("done")
+"""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0 and done.stdout.strip() == "done", done.stderr[-2000:]
+
+
 def test_first_bad_is_the_serial_answer(monkeypatch):
     monkeypatch.setattr(parallel, "MIN_ROWS", 4)
     bad = np.zeros(40, bool)
