@@ -4,10 +4,9 @@
     python bench/serial_share.py [--methods dgmpm-dcu,dgmpm-ctu] [--size 256] [--steps 100] [--threads 2]
 
 Each method's bench plate is stepped on ``--threads`` threads; every threaded pass is timed from the
-calling thread: numba's compiled chunk loops (`parallel.chunked` and DGMPM's face and law's
-loops) and the pool's `parallel.rows` (where numba's layer cannot run them; a pass inside another
-is counted once). What is left of the
-step is the Python between them, the numpy calls on whole arrays and the compiled passes kept on
+calling thread: numba's compiled chunk loops (`parallel.chunked`) and the pool's `parallel.rows`
+(where numba's layer cannot run them; a pass inside another is counted once). What is left of
+the step is the Python between them, the numpy calls on whole arrays and the compiled passes kept on
 one thread. A share s of the k-thread step run on one thread caps k threads at k - (k - 1) s over
 one (Amdahl's law: the passes k times faster, the rest as it was; 2 - s on two threads). Timings
 are measurements on the machine at hand, not test results.
@@ -16,11 +15,8 @@ import argparse
 import statistics
 import time
 
-from skdgmpm import bench, constitutive, dgmpm, parallel
+from skdgmpm import bench, parallel
 from skdgmpm.build import build
-
-COMPILED = ("interior_chunks",)
-
 
 class Clock:
     """Seconds spent in the threaded passes since the last `reset`, each pass once."""
@@ -45,13 +41,9 @@ class Clock:
 
 
 def hook(clock, patch=setattr):
-    """Time every threaded pass: `parallel.chunked` (every chunked pass but two goes through it),
-    DGMPM's face and law's loops, the pool's `parallel.rows`. ``patch(module, name, value)``
+    """Time every threaded pass: `parallel.chunked` (every chunked pass goes through it) and the
+    pool's `parallel.rows`. ``patch(module, name, value)``
     replaces each (a test passes pytest's monkeypatch.setattr, which undoes it)."""
-    for name in COMPILED:
-        patch(dgmpm, name, clock.wrap(getattr(dgmpm, name)))
-    states_chunks = constitutive._states_chunks
-    patch(constitutive, "_states_chunks", lambda *literals: clock.wrap(states_chunks(*literals)))
     patch(parallel, "chunked", clock.wrap(parallel.chunked))
     patch(parallel, "rows", clock.wrap(parallel.rows))
 

@@ -3,16 +3,16 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from skdgmpm.materials.points import law_table, only_law, stress_tangent_point, stress_update_point, tangent_call
 
 from .dgmpm_kernels import record_width, write_record
 from .equations import embed as _embed_point, flux_state
 from .health import Health, health_point, identity_if_not, summarise, tally
-from .parallel import row_product, take_chunk
+from .parallel import row_product
 from . import parallel
-from .kernel_cache import kernel_call, kernel_factory, scratch
+from .kernel_cache import kernel_factory, scratch
 from .system import DIMENSION, embed
 
 
@@ -92,39 +92,6 @@ def _states(d, assess, gathered, slots, split, only):  # literals: the loops unr
                     write_record(q, rho[k], C, normals, row[k], rec, rec_state, n_c, r, d, slots, split)
         return first, J_min, omega_min, fastest
     return states
-
-
-_states_call = kernel_call(_states)
-
-
-@kernel_factory(parallel=True)
-def _states_chunks(d, assess, gathered, slots, split, only):
-    def states_chunks(bounds, laws, params, index, U, rho, h_n, h, Q, health, motion, gather, records):
-        """`_states` over the chunks of the points that ``bounds`` delimits, in parallel, the arrays
-        whole: each chunk's (first bad point, min J, smallest eigenvalue, fastest wave) into arrays."""
-        n = len(bounds) - 1
-        first, J_min, omega_min, fastest = np.empty(n, np.int64), np.empty(n), np.empty(n), np.empty(n)
-        finite, J, lowest, speed, rho_m = health
-        x, v_old, half_dt, x_new = motion
-        indptr, indices, data, nodal = gather
-        rec, row, normals, rec_state = records
-        counter = np.zeros(1, np.int64)
-        for _ in prange(n):                 # each thread takes chunks until none is left
-            c = take_chunk(counter)
-            while c < n:
-                lo, hi = bounds[c], bounds[c + 1]
-                a_lo, a_hi = (lo, hi) if assess else (0, 0)         # health and motion: empty without assess
-                r_lo, r_hi = (lo, hi) if slots else (0, 0)          # the records' rows: none without slots
-                first[c], J_min[c], omega_min[c], fastest[c] = _states_call(
-                    d, assess, gathered, slots, split, only, laws, params, index[lo:hi], U[lo:hi], rho[lo:hi],
-                    h_n[lo:hi], h[lo:hi], Q[lo:hi],
-                    (finite[a_lo:a_hi], J[a_lo:a_hi], lowest[a_lo:a_hi], speed[a_lo:a_hi], rho_m),
-                    (x[a_lo:a_hi], v_old[a_lo:a_hi], half_dt, x_new[a_lo:a_hi]),
-                    (indptr[lo:hi + 1], indices, data, nodal),
-                    (rec, row[r_lo:r_hi], normals, rec_state))
-                c = take_chunk(counter)
-        return first, J_min, omega_min, fastest
-    return states_chunks
 
 
 @kernel_factory
@@ -268,25 +235,10 @@ class MaterialSet:
         else:
             A, nodal = parallel.csr(gather[0]), gather[1]
         index, rho = np.asarray(index, dtype=np.int64), np.asarray(rho, dtype=float)
-        if assess:
-            def rows(lo, hi):
-                return (tuple(a[lo:hi] for a in health[:4]) + health[4:],
-                        (moved[0][lo:hi], moved[1][lo:hi], moved[2], moved[3][lo:hi]))
-        else:
-            def rows(lo, hi):
-                return health, moved
-        # the law's pass among the step's compiled chunk loops (`parallel.compiled_chunks`), like
-        # its other passes
-        bounds = parallel.compiled_chunks(n)
-        if bounds is not None:
-            chunks = _states_chunks(d, assess, gather is not None, slots, split, only_law(self.laws[0]))
-            results = list(zip(*(a.tolist() for a in chunks(bounds, laws, params, index, U, rho, history, h, Q,
-                                                            health, moved, (*A, nodal), records))))
-        else:
-            results = parallel.rows(n, lambda lo, hi: kernel(laws, params, index[lo:hi], U[lo:hi], rho[lo:hi],
-                                                             history[lo:hi], h[lo:hi], Q[lo:hi], *rows(lo, hi),
-                                                             (*parallel.csr_rows(A, lo, hi), nodal),
-                                                             (records[0], records[1][lo:hi], *records[2:])))
+        # health and motion empty without assess, the records' rows without slots: their chunks empty
+        results = parallel.chunked(n, kernel, "wwrrrrrr(rrrrw)(rrwr)(iwww)(wrww)",
+                                   (laws, params, index, U, rho, history, h, Q, health, moved, (*A, nodal), records),
+                                   4)
         if not assess:
             return Q, h
         finite, J, lowest, speed, _ = health

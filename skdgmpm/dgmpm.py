@@ -42,7 +42,7 @@ from skdgmpm.materials.points import law_table
 
 from . import parallel, system
 from .dgmpm_kernels import (boundary_corrections, boundary_edge_corrections, boundary_faces, boundary_terms,
-                            cell_corrections, cell_records, cell_update, euler_update, face_width, interior_chunks,
+                            cell_corrections, cell_records, cell_update, euler_update, face_width,
                             interior_pass, split_width)
 from .errors import InputError
 from .faces import interior_faces
@@ -301,10 +301,8 @@ class DGMPM(GodunovScheme):
         flux, corr_bnd = np.empty((len(f), nc)), np.zeros((len(self.boundary), nc))
         T_L, T_R = (self.traces.get(side, _NO_TRACE) for side in ("L", "R"))
         rho, laws = self.density, self.laws
-        csr = parallel.csr_rows
-
         dofs, normals = self.cell_dofs, self.cell_normals
-        n_cells, (k_L, k_R) = len(dofs), self.local_face
+        k_L, k_R = self.local_face
         rec, state = self._records()
         made, self._records_of = self._records_of, None     # the buffer is rewritten from here on
         if made is None or made[0] is not grid_state.U or made[1] is not grid_state.Q:
@@ -322,21 +320,9 @@ class DGMPM(GodunovScheme):
             h_L = h_R = np.zeros(0)
             n_L = n_R = np.zeros((0, 2, 2))
 
-        def faces(lo, hi):
-            sl = slice(lo, hi) if ctu else slice(0, 0)
-            return interior_pass(csr(T_L, lo, hi), csr(T_R, lo, hi), grid_state.U, grid_state.Q, rho,
-                                 f.normal[lo:hi], f.cell_L[lo:hi], f.cell_R[lo:hi], self.cell_material, *laws,
-                                 (rec, state, normals, k_L[lo:hi], k_R[lo:hi], recorded), ctu, (h_L[sl], n_L[sl]),
-                                 (h_R[sl], n_R[sl]), flux[lo:hi], G[sl])
-        # the step's chunked passes in numba's compiled chunk loops (`parallel.chunked`), none on
-        # the pool, whose workers would compete with numba's spinning ones
-        bounds = parallel.compiled_chunks(len(f))
-        if bounds is not None:
-            bad = interior_chunks(bounds, parallel.csr(T_L), parallel.csr(T_R), grid_state.U, grid_state.Q, rho,
-                                  f.normal, f.cell_L, f.cell_R, self.cell_material, *laws,
-                                  (rec, state, normals, k_L, k_R, recorded), ctu, (h_L, n_L), (h_R, n_R), flux, G)
-        else:
-            bad = parallel.first_bad(len(f), faces)
+        bad = interior_pass(T_L, T_R, grid_state.U, grid_state.Q, rho, f.normal, f.cell_L, f.cell_R,
+                            self.cell_material, *laws, (rec, state, normals, k_L, k_R, recorded), ctu, (h_L, n_L),
+                            (h_R, n_R), flux, G)
         if bad >= 0:
             _not_hyperbolic(bad)
         if ctu and recorded:

@@ -30,7 +30,7 @@ by `DGMPM._setup_transverse` (empty arrays for DCU); the interior pass takes (h,
 of each side, face-major so that a chunk of faces is a contiguous slice.
 """
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from skdgmpm.materials.points import only_law, tangent_call, tangent_point, tangent_points
 
@@ -40,8 +40,7 @@ from .equations import (add_normal_flux, ctu_parts, ctu_parts_opposite, ctu_spli
 from .bcs import star_face
 from .faces import gather_row
 from .health import identity_if_not
-from .kernel_cache import kernel_call, kernel_factory, scratch
-from .parallel import take_chunk
+from .kernel_cache import kernel_factory, scratch
 from .system import DIMENSION, volume_row
 
 
@@ -305,12 +304,14 @@ def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, p
     state, normals, local face of each face in cell L, in cell R, recorded) (`cell_records`): a
     side whose cell is recorded reads its record, another computes its trace's record; with
     ``recorded`` (every cell is) the trace path is not compiled, and CTU writes the two
-    fluctuations into G (nf, 2, nc) instead, for `cell_corrections`. Returns the first face whose
-    acoustic tensor is not positive definite, or -1."""
+    fluctuations into G (nf, 2, nc) instead, for `cell_corrections`. G and the topologies are
+    empty without CTU. The faces in chunks on the threads (`parallel.chunked`). Returns the first
+    face whose acoustic tensor is not positive definite, or -1."""
     rec, state, normals, k_L, k_R, recorded = records
     kernel = _interior_pass(N.shape[1], normals.shape[1], bool(recorded), only_law(laws))
-    return kernel(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params, rec, state, normals, k_L, k_R,
-                  ctu, topo_L, topo_R, flux, G)
+    return parallel.chunked(len(N), kernel, "ccwwwrrrwwwwwwrrw(rr)(rr)rr",
+                            (parallel.csr(T_L), parallel.csr(T_R), U, Q, rho, N, cell_L, cell_R, cell_material, laws,
+                             params, rec, state, normals, k_L, k_R, ctu, topo_L, topo_R, flux, G), "first")
 
 
 @kernel_factory
@@ -380,53 +381,6 @@ def _interior_pass(d, slots, recorded, only):  # literals: the loops unrolled, t
                 _split_into(w_R, C_R, s_R, k_R[f], topo_R, f, G, 2, slots)
         return -1
     return interior_pass
-
-
-def interior_chunks(bounds, T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params, records, ctu,
-                    topo_L, topo_R, flux, G):
-    """`interior_pass` over the chunks of the faces that ``bounds`` delimits (`parallel.
-    compiled_chunks`), in parallel, each chunk the same kernel on its rows: the same bits. The
-    arrays are whole (the faces' rows sliced per chunk here). Returns the first failing face, or
-    -1."""
-    rec, state, normals, k_L, k_R, recorded = records
-    kernel = _interior_chunks(N.shape[1], normals.shape[1], bool(recorded), only_law(laws))
-    return kernel(bounds, T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params, rec, state, normals,
-                  k_L, k_R, ctu, topo_L, topo_R, flux, G)
-
-
-_interior_call = kernel_call(_interior_pass)
-
-
-@kernel_factory(parallel=True)
-def _interior_chunks(d, slots, recorded, only):
-    def interior_chunks(bounds, T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params, rec, state,
-                        normals, k_L, k_R, ctu, topo_L, topo_R, flux, G):
-        n = len(bounds) - 1
-        bad = np.full(n, -1, np.int64)
-        counter = np.zeros(1, np.int64)
-        for _ in prange(n):                 # each thread takes chunks until none is left
-            c = take_chunk(counter)
-            while c < n:
-                lo, hi = bounds[c], bounds[c + 1]
-                g_lo, g_hi = (lo, hi) if ctu else (0, 0)            # G and the topology: empty without CTU
-                b = _interior_call(d, slots, recorded, only, (T_L[0][lo:hi + 1], T_L[1], T_L[2]),
-                                   (T_R[0][lo:hi + 1], T_R[1], T_R[2]), U, Q, rho, N[lo:hi], cell_L[lo:hi],
-                                   cell_R[lo:hi], cell_material, laws, params, rec, state, normals, k_L[lo:hi],
-                                   k_R[lo:hi], ctu, (topo_L[0][g_lo:g_hi], topo_L[1][g_lo:g_hi]),
-                                   (topo_R[0][g_lo:g_hi], topo_R[1][g_lo:g_hi]), flux[lo:hi], G[g_lo:g_hi])
-                bad[c] = lo + b if b >= 0 else -1
-                c = take_chunk(counter)
-        return _first_failing(bad)
-    return interior_chunks
-
-
-@njit(cache=True, inline="always")
-def _first_failing(bad):
-    """The first failing row of a chunk loop (bad: each chunk's first, or -1), or -1."""
-    for c in range(len(bad)):
-        if bad[c] >= 0:
-            return bad[c]
-    return -1
 
 
 @njit(cache=True, inline="always")

@@ -78,7 +78,6 @@ kernel of this package is actually compiled, i.e. only when the cache misses.
 import functools
 import hashlib
 import importlib.util
-import inspect
 import json
 import os
 import re
@@ -91,7 +90,7 @@ import numba
 from numba import njit, types
 from numba.core import cgutils, config, event
 from numba.core.caching import CacheImpl, _CacheLocator
-from numba.extending import intrinsic, overload
+from numba.extending import intrinsic
 from numba.np.numpy_support import carray
 
 PACKAGE = __name__.rpartition(".")[0]           # "skdgmpm"
@@ -217,7 +216,7 @@ def kernel_factory(factory=None, *, parallel=False):
     bools, None or strings); the decorated name, called with the sizes, returns it compiled
     (``njit(cache=True, nogil=True)``: threads run it in parallel, `skdgmpm.parallel`), one kernel
     per distinct sizes, memoised. See the module's docstring. ``@kernel_factory(parallel=True)``:
-    compiled with numba's ``parallel`` (a chunk loop over ``prange``, `kernel_call`)."""
+    compiled with numba's ``parallel`` (a chunk loop over ``prange``, `parallel._chunk_loop`)."""
     if factory is None:
         return functools.partial(kernel_factory, parallel=parallel)
     kernels = {}
@@ -233,36 +232,6 @@ def kernel_factory(factory=None, *, parallel=False):
 
     kernel.kernels = kernels
     return kernel
-
-
-def kernel_call(factory):
-    """A function ``call(*sizes, *args)`` for compiled code: the kernel of ``factory`` (a
-    `kernel_factory`) for the literal ``sizes`` applied to ``args``, the kernel chosen when the
-    caller is typed. A chunk loop closing over the sizes (plain ints: its cache key is the same in
-    every process) reaches its kernel through it; closing over the kernel itself, a dispatcher,
-    it would never be found in the cache (module docstring)."""
-    n = len(inspect.signature(factory).parameters)
-
-    def call(*args):
-        raise TypeError(f"{factory.__name__}: kernel_call is for compiled code")
-
-    @overload(call)
-    def _call(*args):
-        sizes = []
-        for size in args[:n]:
-            if isinstance(size, types.Literal):
-                sizes.append(size.literal_value)
-            elif isinstance(size, types.NoneType):
-                sizes.append(None)
-            else:
-                return None             # not literal: no kernel to choose
-        kernel = factory(*sizes)
-
-        def impl(*args):
-            return kernel(*args[n:])
-        return impl
-
-    return call
 
 
 # ---------------------------------------------------------------- scratch arrays of a kernel

@@ -22,9 +22,7 @@ without storing it, each chunk of output rows scattering into its own rows only.
 
 Compiled chunk loops: every method's chunked passes run over their chunks from a numba ``prange``
 (`compiled_chunks`: one loop for every pass, `_chunk_loop`, which writes each kernel's call out
-once from its spec; DGMPM's face and law's passes, whose rows are cut by a flag, have loops of
-their own in `dgmpm_kernels` and `constitutive`, reaching their kernels through `kernel_cache.
-kernel_call`) where numba's threading layer is OpenMP or TBB: its threads take their chunks
+once from its spec) where numba's threading layer is OpenMP or TBB: its threads take their chunks
 without the GIL and without waking from the OS, where each worker of the pool below wakes and
 takes the GIL (docs/bench/session20.md). numba deals a ``prange`` out in equal shares, so each of
 its threads takes the next chunk left from a counter (`take_chunk`, an atomic add), as the pool's
@@ -193,8 +191,8 @@ def _run(call, parts, n_threads):
 
 def compiled_chunks(n, min_rows=None):
     """The bounds [lo_0, lo_1, ..., n] (int64) of the chunks of range(n) (`chunks`), for
-    a compiled chunk loop (a ``prange`` over them calling the kernel on each: `kernel_cache.
-    kernel_call`), numba's thread count set to their number; None where the loop is better run
+    a compiled chunk loop (a ``prange`` over them calling the kernel on each: `_chunk_loop`),
+    numba's thread count set to their number; None where the loop is better run
     by `rows`: one chunk, or a threading layer of numba's other than OpenMP and TBB (its
     ``workqueue`` hands chunks over slower than this module's pool, docs/bench/session20.md).
     The same chunks, each computed by the same kernel: the same bits as `rows`. numba's
@@ -282,30 +280,33 @@ def chunked(n, kernel, spec, args, returns=0, min_rows=None):
     letter a parameter: ``r`` the argument's rows lo:hi, ``i`` its entries lo:hi + 1 (an
     indptr), ``c`` a CSR triple's rows (`csr_rows`), ``k`` its columns lo:hi, ``n`` its entry of
     the chunk (the chunk's number in `chunks`), ``w`` the argument whole, ``l`` and ``h`` lo and
-    hi themselves (no argument taken); letters in brackets, a tuple
-    argument, each of its items as its letter says (``(rrw)``). A compiled chunk loop runs
-    the chunks where numba can (`compiled_chunks`), `rows` where not. ``returns``: 0 (what the
-    kernel returns is dropped; returns None), ``"first"`` (the kernel returns its chunk's first
-    failing row or -1; returns the first failing row of range(n), or -1, as one serial pass
-    would) or k > 0 (the kernel returns k numbers, a tuple where k > 1; returns them, an array
-    (chunks, k) of floats in chunk order). ``min_rows``: as `chunks` has it."""
+    hi themselves (no argument taken); letters in brackets, a tuple argument, each of its items
+    as its letter says (``(rrw)``). An array left empty where the kernel does not read it (a
+    health check not asked for) is cut by ``r`` all the same: its chunks are empty. A compiled
+    chunk loop runs the chunks where numba can (`compiled_chunks`), the pool (`rows`) where not.
+    ``returns``: 0 (what the kernel returns is dropped; returns None), ``"first"`` (the kernel
+    returns its chunk's first failing row or -1; returns the first failing row of range(n), or
+    -1, as one serial pass would) or k > 0 (the kernel returns k numbers, a tuple where k > 1;
+    returns them, an array (chunks, k) of floats in chunk order). ``min_rows``: as `chunks` has
+    it."""
     width, parsed = (1 if returns == "first" else returns), _parsed(spec)
     if sum(letter not in ("l", "h") for letter in parsed) != len(args):
         raise ValueError(f"chunked: spec {spec!r} for {len(args)} arguments")
     bounds = compiled_chunks(n, min_rows)
     if bounds is None:
-        number = {lo: c for c, (lo, _) in enumerate(chunks(n, min_rows))}
+        parts = chunks(n, min_rows)
+        number = {lo: c for c, (lo, _) in enumerate(parts)}
         results = rows(n, lambda lo, hi: kernel(*_sliced(parsed, args, lo, hi, number[lo])), min_rows)
         if returns == "first":
-            return next((lo + b for (lo, _), b in zip(chunks(n, min_rows), results) if b >= 0), -1)
+            return next((lo + b for (lo, _), b in zip(parts, results) if b >= 0), -1)
         return np.array(results, float).reshape(len(results), width) if width else None
     leaves = []
     shape = _shape(args, leaves)
+    if len(leaves) > LEAVES:
+        raise ValueError(f"chunked: {len(leaves)} arrays and numbers, more than {LEAVES}")
     key = f"{kernel_name(kernel)}:{spec}:{shape}:{returns}"
     _CHUNK_KERNELS[key] = kernel, spec, shape, returns
     out = np.empty((len(bounds) - 1, width))
-    if len(leaves) > LEAVES:
-        raise ValueError(f"chunked: {len(leaves)} arrays and numbers, more than {LEAVES}")
     _chunk_loop(key)(bounds, out, *leaves, *(0,) * (LEAVES - len(leaves)))
     if returns == "first":
         return next((int(b) for b in out[:, 0] if b >= 0), -1)
@@ -457,15 +458,6 @@ def _chunk_loop(key):                   # key: a string literal, `_chunk_call`'s
                              a19, a20, a21, a22, a23, a24, a25, a26, a27, a28, a29, a30, a31))
                 c = take_chunk(counter)
     return chunk_loop
-
-
-def first_bad(n, call):
-    """`rows` for a pass that returns the first failing row of its chunk (or -1): the first
-    failing row of range(n), or -1 (the same as one serial pass would return)."""
-    for (lo, _), bad in zip(chunks(n), rows(n, call)):
-        if bad >= 0:
-            return lo + bad
-    return -1
 
 
 def add_scaled(x, a, y, out=None):

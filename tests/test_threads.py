@@ -327,22 +327,6 @@ print("done")
     assert done.returncode == 0 and done.stdout.strip() == "done", done.stderr[-2000:]
 
 
-def test_first_bad_is_the_serial_answer(monkeypatch):
-    monkeypatch.setattr(parallel, "MIN_ROWS", 4)
-    bad = np.zeros(40, bool)
-    bad[[13, 31]] = True
-
-    def chunk(lo, hi):
-        hits = np.flatnonzero(bad[lo:hi])
-        return int(hits[0]) if len(hits) else -1
-    try:
-        for n in (1, 2, 3):
-            parallel.set_threads(n)
-            assert parallel.first_bad(40, chunk) == 13
-    finally:
-        parallel.set_threads(None)
-
-
 def test_a_bad_thread_count_is_refused():
     with pytest.raises(ValueError, match="threads = 0"):
         parallel.set_threads(0)
