@@ -516,11 +516,9 @@ class DGMPM(GodunovScheme):
 
     @stage
     def nodal_state(self, U):
-        """Q at the nodes from U at the nodes (the law evaluated at nodes, RK2 second stage)."""
-        d = self.d
-        F, p = system.split(U, d)
-        P = self.materials.stress(F, self.cell_material[self.dof_cell])
-        return GridState(U, system.primitive(P, p, self.density))
+        """Q at the nodes from U at the nodes (the law evaluated at nodes, RK2 second stage): the
+        law's pass of the particles (`MaterialSet.state`), the history in its virgin state."""
+        return GridState(U, self.materials.state(U, self.cell_material[self.dof_cell], self.density))
 
     # ---------------------------------------------------------------- driver-facing
     @property

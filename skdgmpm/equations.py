@@ -43,10 +43,17 @@ def embed(u, F, d):
 
 @njit(cache=True, inline="always")
 def flux_state(P, u, rho, q, d):
-    """q = [P, v] from the stress P (d, d) and the state row u = [F, p]: v = p / rho0."""
+    """q = [P, v] from the stress P (d, d) and the state row u = [F, p] (`velocity`)."""
     for i in range(d):
         for a in range(d):
             q[i * d + a] = P[i, a]
+    velocity(u, rho, q, d)
+
+
+@njit(cache=True, inline="always")
+def velocity(u, rho, q, d):
+    """v = p / rho0 into q = [P, v] from the state row u = [F, p]."""
+    for i in range(d):
         q[d * d + i] = u[d * d + i] / rho
 
 

@@ -9,13 +9,13 @@ from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit
 from skfem import CellBasis
 from skfem.assembly import Dofs
 
 from skdgmpm import forms
 
 from . import parallel
+from .equations import velocity
 from .kernel_cache import kernel_factory, scratch
 
 
@@ -277,10 +277,7 @@ def _project_state(d):                  # literal widths: the loops unrolled
                     u[c] += w * U[p, c]
                 for c in range(dd):
                     q[c] += w * Q[p, c]
+            velocity(u, rho[r], q, d)
             for c in range(nc):
-                U_n[r, c] = u[c]
-            for c in range(dd):
-                Q_n[r, c] = q[c]
-            for c in range(dd, nc):
-                Q_n[r, c] = u[c] / rho[r]
+                U_n[r, c], Q_n[r, c] = u[c], q[c]
     return project_state

@@ -44,25 +44,6 @@ def _join(d):                           # a literal d: the loops unrolled
 
 
 @kernel_factory
-def _primitive(d):                      # a literal d: the loops unrolled (2x faster)
-    def primitive(P, p, rho, Q):
-        for k in range(len(p)):
-            for i in range(d):
-                for a in range(d):
-                    Q[k, i * d + a] = P[k, i, a]
-                Q[k, d * d + i] = p[k, i] / rho[k]
-    return primitive
-
-
-def primitive(P, p, rho):
-    """Q = [P, v], v = p / rho0, from the stress P (n, d, d), momentum p (n, d) and density (n,):
-    one compiled pass (P and p may be strided views, e.g. a law's (n, 3, 3) output sliced)."""
-    Q = np.empty((len(p), n_components(p.shape[1])))
-    _primitive(p.shape[1])(P, p, np.asarray(rho, dtype=float), Q)
-    return Q
-
-
-@kernel_factory
 def _embed(d):
     def embed(F, F3):
         for p in range(len(F)):

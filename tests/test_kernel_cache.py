@@ -153,12 +153,12 @@ def test_every_environment_with_the_same_sources_shares_the_cache_and_an_edit_ch
 
 
 PER_D = ("import json, numpy as np; from skdgmpm import system, riemann\n"
-         "system.primitive(np.ones((4, 1, 1)), np.ones((4, 1)), np.ones(4))\n"
+         "system.embed(np.ones((4, 1, 1)))\n"
          "riemann.impedances(np.ones((3, 1, 1, 1, 1)), np.ones((3, 1)), np.ones(3))\n"
-         "print(json.dumps([sorted(system._primitive.kernels), sorted(riemann._impedances.kernels),"
+         "print(json.dumps([sorted(system._embed.kernels), sorted(riemann._impedances.kernels),"
          " sorted(system._volume_flux.kernels)]))")
 
 
 def test_a_scene_compiles_the_kernels_of_its_own_dimension_only(tmp_path):
-    (primitive, impedances, volume_flux), _ = python(PER_D, cwd=tmp_path)
-    assert primitive == impedances == [[1]] and volume_flux == []
+    (embed, impedances, volume_flux), _ = python(PER_D, cwd=tmp_path)
+    assert embed == impedances == [[1]] and volume_flux == []
