@@ -58,6 +58,7 @@ import time
 import numpy as np
 
 from . import peer
+from .bench_kernels import arithmetic_rows
 from .errors import InputError
 from .integrators import EVALUATIONS
 from .study import L23_LAYOUT
@@ -259,7 +260,7 @@ def alternate_threads(disc, threads, pairs, warmup, probe_rounds=0):
     ``threads`` in turn (`alternate`: one step per count a round; any count gives the same bits).
     Returns the CPU and wall times (len(threads), pairs) and the final state; the thread setting
     is restored. With ``probe_rounds``, each round also runs the arithmetic probe's work
-    (`arithmetic_pass`, that many rounds) on each count, among the steps (ABBA): also returns
+    (`_ArithmeticPass`, that many rounds) on each count, among the steps (ABBA): also returns
     its wall times (len(threads), pairs), what the machine gave the threads in those rounds."""
     from . import parallel
 
@@ -267,7 +268,7 @@ def alternate_threads(disc, threads, pairs, warmup, probe_rounds=0):
     sides = [step] * T + ([_ArithmeticPass(t, probe_rounds) for t in threads] if probe_rounds else [])
 
     def before(i):
-        if i >= T:              # the probe on workers started for it (`parallel.restart`)
+        if i >= T:              # where the pool runs the probe, on workers started for it (`parallel.restart`)
             parallel.restart()
         _use_threads(threads[i % T])
         if i >= T:              # numba's threads, spinning after a compiled chunk loop, gone to sleep
@@ -349,9 +350,10 @@ ARITHMETIC_ROWS = 16384     # each thread's share of the arithmetic probe: 128 k
 
 
 def arithmetic(threads, rounds=200, repeats=5):
-    """The speed-up of arithmetic on each thread count: each of t chunks of a pass (`parallel.rows`)
-    takes ``rounds`` rounds of exp and sqrt over its own ARITHMETIC_ROWS numbers (in cache; numpy
-    releases the GIL; `_ArithmeticPass`), best of ``repeats``; t times the work per second of one
+    """The speed-up of arithmetic on each thread count: a pass of the steps' kind (`parallel.
+    chunked`: numba's compiled chunk loop where the steps' passes run on it, the pool where they
+    do) over ARITHMETIC_ROWS numbers a thread, ``rounds`` rounds of exp and sqrt over each chunk's
+    rows (in cache; `_ArithmeticPass`), best of ``repeats``; t times the work per second of one
     thread. What a pass bound by its arithmetic can gain from more threads now: on a VM whose
     virtual cores share their host's cores with other guests, less than t (x1.27-1.95 on two
     threads of this project's VM within an hour, docs/bench/session21.md)."""
@@ -375,24 +377,23 @@ PROBE_PAUSE_S = 0.02        # untimed, before each: OpenMP's idle threads spin s
 
 
 class _ArithmeticPass:
-    """One pass of the arithmetic probe on ``threads`` threads (the count set by the caller): t
-    chunks (`parallel.rows`), each ``rounds`` rounds of exp and sqrt over its own ARITHMETIC_ROWS
-    numbers in cache."""
+    """One pass of the arithmetic probe on ``threads`` threads (the count set by the caller):
+    ARITHMETIC_ROWS numbers a thread, in the chunks and on the threads of the steps' passes
+    (`parallel.chunked`), ``rounds`` rounds of exp and sqrt over each chunk's rows
+    (`bench_kernels.arithmetic_rows`), so that a step's speed-up reads against the same machinery's."""
 
     def __init__(self, threads, rounds):
         self.threads, self.rounds = threads, rounds
+        self.x = np.linspace(0.1, 1.0, threads * ARITHMETIC_ROWS)
+        self.y = np.empty_like(self.x)
 
     def _chunk(self, lo, hi):
-        x = np.linspace(0.1, 1.0, ARITHMETIC_ROWS)
-        y = np.empty_like(x)
-        for _ in range(self.rounds):
-            np.exp(x, out=y)
-            np.sqrt(y, out=y)
+        arithmetic_rows(self.x[lo:hi], self.y[lo:hi], self.rounds)
 
     def __call__(self):
         from . import parallel
 
-        parallel.each_thread(self.threads * parallel.MIN_ROWS, self._chunk)
+        parallel.chunked(len(self.x), arithmetic_rows, "rrw", (self.x, self.y, self.rounds))
 
 
 CORE_TURNS = 9              # turns of the cores-alone probe (each core once a turn)
@@ -415,7 +416,7 @@ def cores_alone(turns=CORE_TURNS, rounds=PROBE_ROUNDS):
     work, times = _ArithmeticPass(1, rounds), {core: [] for core in cores}
     for _ in range(turns):
         for core in cores:
-            times[core].append(on_core(core, lambda: work._chunk(0, 0)))
+            times[core].append(on_core(core, lambda: work._chunk(0, ARITHMETIC_ROWS)))
     return times
 
 

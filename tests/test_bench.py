@@ -144,12 +144,13 @@ def test_memory_bandwidth_probe_writes_the_triad():
 
 
 def test_arithmetic_probe_gives_each_thread_count_its_share(monkeypatch):
-    """The arithmetic probe's pass is split into as many chunks as threads, each doing the same
-    work: the speed-up is t times one thread's rate over t threads' rate, 1 for one thread."""
+    """The arithmetic probe's pass runs as the steps' passes do (`parallel.chunked`), on as many
+    threads as it is given, each thread's share the same work: the speed-up is t times one
+    thread's rate over t threads' rate, 1 for one thread."""
     from skdgmpm import parallel
 
-    seen, each = [], parallel.each_thread
-    monkeypatch.setattr(parallel, "each_thread", lambda n, call: seen.append(parallel.team(n)) or each(n, call))
+    seen, chunked = [], parallel.chunked
+    monkeypatch.setattr(parallel, "chunked", lambda n, *a: seen.append(parallel.team(n)) or chunked(n, *a))
     speedups = bench.arithmetic((1, 2), rounds=2, repeats=1)
     assert seen == [1, 1, 2, 2] and speedups[1] == 1.0 and speedups[2] > 0
     line = bench.format_arithmetic(speedups)
