@@ -376,8 +376,8 @@ class MPM(GodunovScheme):
         # |v| in the bound nearly every step would be taken twice)
         # the stages replace F, P and v, never write into them: views of the state will do
         s = StepData(state.t, self.time_step(state, dt_max), state.step, F, P, v, state.x.copy(), state.history)
-        for stage in self.variant.stages:
-            getattr(self, stage)(s)
+        for name in self.variant.stages:
+            getattr(self, name)(s)
         new = ParticleState(state.t + s.dt, system.join(s.F, self.particles.rho0[:, None] * s.v),
                             system.join(s.P, s.v), s.x, state.step + 1, history=s.history)
         # the health of F and P came with the stress; it is the state's where p and v are finite

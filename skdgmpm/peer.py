@@ -141,8 +141,6 @@ def problem(scene):
 
 def _boundary_conditions(prob, y_with_ghost):
     """PyClaw custom ghost-cell functions (lower, upper) for the four sides of ``prob``."""
-    import numpy as np
-
     g = NUM_GHOST
     S11, S22, S12, U, V = range(5)
     normal = {"x": (S11, U), "y": (S22, V)}         # (normal stress, normal velocity) per direction

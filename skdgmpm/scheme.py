@@ -11,9 +11,8 @@ import time as _time
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
-from . import parallel, system
+from . import system
 from .bcs import FREE, BoundaryGhosts
 from .errors import InputError, InstabilityError
 from .faces import boundary_faces
