@@ -461,26 +461,28 @@ HANDOFF_GAP_S = 5e-4       # the main thread's work between two passes of the pr
 
 
 def handoff(threads, calls=200, gap=HANDOFF_GAP_S):
-    """Seconds of an empty pass with a chunk for each thread (`parallel.each_thread`, each doing
-    nothing), median of ``calls``, the main thread busy for ``gap`` s between two (the workers
-    idle, as between a step's passes), on each thread count: what starting every thread costs.
-    On a VM it is the time to wake an idle virtual CPU, and it varies with the host's load: 14-23
-    µs and 160-420 µs on two threads of the same VM an hour apart (docs/bench/session20.md). A
-    step's passes (`parallel.rows`) no longer wait for it: a worker that starts late takes fewer
-    chunks."""
+    """Seconds of a pass of next to no work (each row zeroed, `bench_kernels.arithmetic_rows` with
+    no rounds) in the chunks and on the threads of the steps' passes (`parallel.chunked`: numba's
+    compiled chunk loop, or the pool where the steps' passes run on it), median of ``calls``, the
+    main thread busy for ``gap`` s between two (as between a step's passes), on each thread count:
+    what handing a pass to every thread costs. numba's threads spin a while after a loop, and find
+    the next one at once; the pool's workers sleep, and on a VM waking an idle virtual CPU took
+    14-23 µs and 160-420 µs on two threads of the same VM an hour apart (docs/bench/session20.md).
+    A step's passes do not wait for a thread that starts late: it takes fewer chunks."""
     from . import parallel
 
     previous, costs = parallel.set_threads(1), {}
     try:
         for t in threads:
             parallel.set_threads(t)
-            n = t * parallel.MIN_ROWS
+            x = np.zeros(t * parallel.MIN_ROWS)
+            y = np.empty_like(x)
             times = []
             for _ in range(calls):
                 t0 = time.perf_counter()
                 while time.perf_counter() - t0 < gap:
                     pass
-                times.append(_timed(lambda: parallel.each_thread(n, lambda lo, hi: None)))
+                times.append(_timed(lambda: parallel.chunked(len(x), arithmetic_rows, "rrw", (x, y, 0))))
             costs[t] = float(np.median(times))
     finally:
         parallel.set_threads(previous)
@@ -488,12 +490,13 @@ def handoff(threads, calls=200, gap=HANDOFF_GAP_S):
 
 
 def format_handoff(costs):
-    """One line: an empty chunked pass's cost per thread count."""
+    """One line: a chunked pass's cost per thread count, its work next to nothing (`handoff`)."""
     if len(costs) < 2:
         return ""
     parts = ", ".join(f"{t} thread{'s' if t > 1 else ''} {1e6 * c:.0f} µs" for t, c in sorted(costs.items()))
-    return (f"hand-off (an empty pass on every thread, {1e6 * HANDOFF_GAP_S:.0f} µs after the last): {parts}: "
-            "what waking the threads takes (a step's passes go on without the threads not yet awake)")
+    return (f"hand-off (a pass of next to no work on every thread, {1e6 * HANDOFF_GAP_S:.0f} µs after the last): "
+            f"{parts}: what handing a pass to the threads takes (a step's passes go on without the threads "
+            "not yet awake)")
 
 
 def _timed(call):

@@ -42,7 +42,7 @@ def test_bench_measures_each_thread_count(tmp_path, capsys):
     assert "arithmetic (exp, sqrt on" in text
     # and what an empty chunked pass costs on each (the hand-off of its chunks to the threads)
     assert set(data["machine"]["handoff_s"]) == {"1", "2"} and min(data["machine"]["handoff_s"].values()) > 0
-    assert "hand-off (an empty pass on every thread" in text and "2 threads" in text
+    assert "hand-off (a pass of next to no work on every thread" in text and "2 threads" in text
     # and each core's speed alone, turn by turn (one line where there are several)
     cores = {str(c) for c in os.sched_getaffinity(0)} if hasattr(os, "sched_getaffinity") else set()
     assert set(data["machine"]["cores_alone_s"]) == cores
@@ -180,12 +180,13 @@ def test_unknown_benchmark_is_a_clear_error():
 
 
 def test_handoff_probe_splits_an_empty_pass_over_each_count(monkeypatch):
-    """The hand-off probe's empty pass is split into as many chunks as threads (the cost it
-    measures is the hand-off to that many), and its line says one cost per count."""
+    """The hand-off probe's pass of next to no work runs as the steps' passes do (`parallel.
+    chunked`) on each thread count (the cost it measures is the hand-off to that many), and its
+    line says one cost per count."""
     from skdgmpm import parallel
 
-    seen, each = [], parallel.each_thread
-    monkeypatch.setattr(parallel, "each_thread", lambda n, call: seen.append(parallel.team(n)) or each(n, call))
+    seen, chunked = [], parallel.chunked
+    monkeypatch.setattr(parallel, "chunked", lambda n, *a: seen.append(parallel.team(n)) or chunked(n, *a))
     costs = bench.handoff((1, 2, 3), calls=2, gap=0.0)
     assert set(costs) == {1, 2, 3} and all(c > 0 for c in costs.values()) and seen == [1, 1, 2, 2, 3, 3]
     line = bench.format_handoff(costs)
