@@ -298,7 +298,10 @@ class DGMPM(GodunovScheme):
         gathered correction, or none for DCU), and of the boundary faces' fluxes (nb, nc)."""
         f, nc = self.interior, grid_state.U.shape[1]
         ctu = self.ctu is not None
-        flux, corr_bnd = np.empty((len(f), nc)), np.zeros((len(self.boundary), nc))
+        # forward Euler: one projected state's faces a step (the CFL guard's attempts reuse them),
+        # so the fluxes are a work array; RK2's second stage keeps the first's while it computes
+        flux = self._buffer("interior fluxes", (len(f), nc)) if self.integrator == "euler" else np.empty((len(f), nc))
+        corr_bnd = np.zeros((len(self.boundary), nc))
         T_L, T_R = (self.traces.get(side, _NO_TRACE) for side in ("L", "R"))
         rho, laws = self.density, self.laws
         dofs, normals = self.cell_dofs, self.cell_normals
