@@ -6,8 +6,8 @@
 Each method's bench plate is stepped on ``--threads`` threads; every threaded pass is timed from the
 calling thread: numba's compiled chunk loops (`parallel.chunked`) and the pool's `parallel.rows`
 (where numba's layer cannot run them; a pass inside another is counted once). What is left of
-the step is the Python between them, the numpy calls on whole arrays and the compiled passes kept on
-one thread. A share s of the k-thread step run on one thread caps k threads at k - (k - 1) s over
+the step is the Python between them, the numpy calls on whole arrays and the compiled passes kept
+on one thread. A share s of the k-thread step run on one thread caps k threads at k - (k - 1) s over
 one (Amdahl's law: the passes k times faster, the rest as it was; 2 - s on two threads). Timings
 are measurements on the machine at hand, not test results.
 """
@@ -42,8 +42,8 @@ class Clock:
 
 def hook(clock, patch=setattr):
     """Time every threaded pass: `parallel.chunked` (every chunked pass goes through it) and the
-    pool's `parallel.rows`. ``patch(module, name, value)``
-    replaces each (a test passes pytest's monkeypatch.setattr, which undoes it)."""
+    pool's `parallel.rows`. ``patch(module, name, value)`` replaces each (a test passes pytest's
+    monkeypatch.setattr, which undoes it)."""
     patch(parallel, "chunked", clock.wrap(parallel.chunked))
     patch(parallel, "rows", clock.wrap(parallel.rows))
 
