@@ -289,10 +289,18 @@ def chunked(n, kernel, spec, args, returns=0, min_rows=None):
     -1, as one serial pass would) or k > 0 (the kernel returns k numbers, a tuple where k > 1;
     returns them, an array (chunks, k) of floats in chunk order). ``min_rows``: as `chunks` has
     it."""
-    width, parsed = (1 if returns == "first" else returns), _parsed(spec)
-    if sum(letter not in ("l", "h") for letter in parsed) != len(args):
-        raise ValueError(f"chunked: spec {spec!r} for {len(args)} arguments")
+    width = 1 if returns == "first" else returns
     bounds = compiled_chunks(n, min_rows)
+    plan = _PLANS.get((kernel, spec, returns))
+    if bounds is not None and plan is not None:
+        try:
+            flat = plan[1](args)
+        except _Mismatch:               # the arguments nest otherwise than last time: planned anew
+            plan = None
+    if bounds is None or plan is None:
+        parsed = _parsed(spec)
+        if sum(letter not in ("l", "h") for letter in parsed) != len(args):
+            raise ValueError(f"chunked: spec {spec!r} for {len(args)} arguments")
     if bounds is None:
         parts = chunks(n, min_rows)
         number = {lo: c for c, (lo, _) in enumerate(parts)}
@@ -300,17 +308,65 @@ def chunked(n, kernel, spec, args, returns=0, min_rows=None):
         if returns == "first":
             return next((lo + b for (lo, _), b in zip(parts, results) if b >= 0), -1)
         return np.array(results, float).reshape(len(results), width) if width else None
+    if plan is None:
+        plan = _plan(kernel, spec, args, returns)
+        flat = plan[1](args)
+    out = np.empty((len(bounds) - 1, width))
+    plan[0](bounds, out, *flat)
+    if returns == "first":
+        failing = out[:, 0]
+        failing = failing[failing >= 0]
+        return int(failing[0]) if len(failing) else -1
+    return out if width else None
+
+
+_PLANS = {}             # (kernel, spec, returns) -> (its compiled chunk loop, the flattener of its arguments)
+
+
+class _Mismatch(Exception):
+    """Arguments that nest otherwise than the plan's (`_flattener`)."""
+
+
+def _plan(kernel, spec, args, returns):
+    """The compiled chunk loop of a `chunked` pass and a function that flattens its arguments
+    into the loop's parameters (`_flattener`), made once per kernel, spec and returns: walking the
+    arguments' nesting at every call cost a pass 5-20 µs of Python (the more after a pass that
+    has evicted the interpreter from the caches), each step several."""
     leaves = []
     shape = _shape(args, leaves)
     if len(leaves) > LEAVES:
         raise ValueError(f"chunked: {len(leaves)} arrays and numbers, more than {LEAVES}")
     key = f"{kernel_name(kernel)}:{spec}:{shape}:{returns}"
     _CHUNK_KERNELS[key] = kernel, spec, shape, returns
-    out = np.empty((len(bounds) - 1, width))
-    _chunk_loop(key)(bounds, out, *leaves, *(0,) * (LEAVES - len(leaves)))
-    if returns == "first":
-        return next((int(b) for b in out[:, 0] if b >= 0), -1)
-    return out if width else None
+    plan = _PLANS[kernel, spec, returns] = _chunk_loop(key), _flattener(shape)
+    return plan
+
+
+@functools.lru_cache(maxsize=None)
+def _flattener(shape):
+    """A function of a `chunked` pass's arguments that nest as ``shape`` (`_shape`'s text):
+    their items that are not tuples in order, padded with zeros to `LEAVES` items (the chunk
+    loop's parameters); it raises `_Mismatch` where the arguments nest otherwise (tuples as
+    `_shape` sees them)."""
+    lines, leaves, count = [], [], itertools.count()
+
+    def unpack(name, shape):
+        names = [f"x{next(count)}" for _ in shape]
+        lines.append(f"if not isinstance({name}, tuple) or len({name}) != {len(shape)}: raise _Mismatch")
+        lines.append(f"{''.join(n + ', ' for n in names)}= {name}")
+        for n, s in zip(names, shape):
+            if isinstance(s, tuple):
+                unpack(n, s)
+            else:
+                lines.append(f"if isinstance({n}, tuple): raise _Mismatch")
+                leaves.append(n)
+
+    unpack("args", _parsed(shape, (".",)))
+    body = "".join(f"    {line}\n" for line in lines)
+    padding = "0, " * (LEAVES - len(leaves))
+    namespace = {"_Mismatch": _Mismatch}
+    exec(f"def flatten(args):\n{body}    return ({''.join(n + ', ' for n in leaves)}{padding})\n", namespace)
+    return namespace["flatten"]
 
 
 def kernel_name(kernel):

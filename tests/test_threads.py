@@ -298,6 +298,38 @@ def test_chunked_cuts_each_argument_as_its_spec_says(compiled, monkeypatch):
         parallel.set_threads(None)
 
 
+@numba.njit(nogil=True)
+def _whole_count(lo, hi, x, out):
+    for r in range(lo, hi):
+        out[r] = len(x)
+
+
+def test_chunked_plans_again_where_the_arguments_nest_otherwise(monkeypatch):
+    """`parallel.chunked` keeps, per kernel and spec, its compiled loop and a function that
+    flattens the arguments as they nested at the first call (`parallel._plan`): a ``w`` given an
+    array, then a tuple of three arrays, then an array again, is each time read as given (the
+    plan made anew where the nesting changed), and a call with too few arguments is still
+    refused by name once a plan exists."""
+    if not parallel._compiled_layer():
+        pytest.skip("no compiled chunk loops here")
+    monkeypatch.setattr(parallel, "MIN_ROWS", 8)
+    n = 64
+    out = np.zeros(n)
+    try:
+        parallel.set_threads(2)
+        for x, count in ((np.zeros(5), 5), ((np.zeros(2), np.zeros(3), np.zeros(1)), 3), (np.zeros(7), 7),
+                         (np.zeros(4), 4)):
+            parallel.chunked(n, _whole_count, "lhww", (x, out))
+            assert np.all(out == count)
+        plan = parallel._PLANS[_whole_count, "lhww", 0]
+        parallel.chunked(n, _whole_count, "lhww", (np.zeros(2), out))
+        assert parallel._PLANS[_whole_count, "lhww", 0] is plan          # the same nesting: the same plan
+        with pytest.raises(ValueError, match="for 1 arguments"):
+            parallel.chunked(n, _whole_count, "lhww", (out,))
+    finally:
+        parallel.set_threads(None)
+
+
 def test_a_dcu_step_after_a_ctu_step_on_three_threads_keeps_the_heap_whole():
     """The compiled chunk loop once took its arguments as one tuple of arrays of several kinds:
     a CTU simulation on three threads, then a DCU one on two, aborted the process when the second
