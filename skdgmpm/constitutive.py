@@ -1,4 +1,5 @@
 """Material laws evaluated on d-dimensional states, one law per particle (or node) group."""
+import functools
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -139,6 +140,15 @@ def _stresses(d, assess, only):         # literals: the loops unrolled, the heal
     return stresses
 
 
+@functools.lru_cache(maxsize=8)
+def _no_gather(n, width):
+    """The empty gather of `MaterialSet.update` (a CSR of n empty rows, no nodal values): read,
+    never written, so made once per size (its indptr is n + 1 zeros, 256 kB at 256^2, zeroed
+    afresh at every step before). Left writable: numba types a read-only array apart, and would
+    compile the law's pass twice."""
+    return (np.zeros(n + 1, np.int32), np.zeros(0, np.int32), np.zeros(0)), np.zeros((0, width))
+
+
 @dataclass(frozen=True)
 class MaterialSet:
     """The scene's materials and, for a batch of points, which one applies (``index`` (n,))."""
@@ -231,7 +241,7 @@ class MaterialSet:
             split = records[0][1].shape[1] > 0
         (laws, params), kernel = self.laws, _states(d, assess, gather is not None, slots, split, only_law(self.laws[0]))
         if gather is None:
-            A, nodal = (np.zeros(n + 1, np.int32), np.zeros(0, np.int32), np.zeros(0)), np.zeros((0, U.shape[1]))
+            A, nodal = _no_gather(n, U.shape[1])
         else:
             A, nodal = parallel.csr(gather[0]), gather[1]
         index, rho = np.asarray(index, dtype=np.int64), np.asarray(rho, dtype=float)

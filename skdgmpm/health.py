@@ -153,6 +153,7 @@ def summarise(chunks, results):
     fastest wave) (`parallel.chunked`'s results, in chunk order): the first bad point of the first
     chunk that has one; the minima over the chunks (nan where no point is finite); the maximum
     (nan where a chunk's is)."""
+    results = results.tolist() if isinstance(results, np.ndarray) else results    # floats, not numpy scalars
     first = next((lo + r[0] for (lo, _), r in zip(chunks, results) if r[0] >= 0), -1)
     J_min = min(r[1] for r in results)
     omega = [r[2] for r in results]
