@@ -11,7 +11,8 @@ from numba import njit
 from skdgmpm.materials.points import only_law, stress_points, tangent_call, tangent_points
 
 from . import parallel
-from .equations import add_normal_flux, ctu_split, fluctuations, godunov, impedance as _impedance, riemann
+from .equations import (add_normal_flux, ctu_split, flux_state, fluctuations, godunov, impedance as _impedance,
+                        riemann)
 from .errors import InstabilityError
 from .faces import gather_row
 from .kernel_cache import kernel_factory, scratch
@@ -73,7 +74,7 @@ def _godunov_fluxes(d):
 
 @kernel_factory
 def _trace_fluxes(d, traced, only):    # traced: 1 if Q is traced (a law with history), 0: the law at the trace; one law
-    dd, nc = d * d, d * d + d
+    nc = d * d + d
 
     def trace_fluxes(T_L, T_R, U, Q, rho_L, rho_R, N, mat_L, mat_R, laws, params, flux):
         """Each side's state is formed in stack scratch as the unfused path formed it (the trace
@@ -90,11 +91,8 @@ def _trace_fluxes(d, traced, only):    # traced: 1 if Q is traced (a law with hi
             m_L, m_R = mat_L[f], mat_R[f]
             if not traced:              # q holds the trace of U: [F, p] -> [P(F), p / rho0]
                 stress_points(laws, params, m_L, m_R, only, F_L, F_R, P_L, P_R, d)
-                for i in range(d):
-                    for a in range(d):
-                        q_L[i * d + a], q_R[i * d + a] = P_L[i, a], P_R[i, a]
-                    q_L[dd + i] = q_L[dd + i] / rho_L[f]
-                    q_R[dd + i] = q_R[dd + i] / rho_R[f]
+                flux_state(P_L, q_L, rho_L[f], q_L, d)      # q's p read before its v is written, entry by entry
+                flux_state(P_R, q_R, rho_R[f], q_R, d)
             if d == 1:                  # the law called, not inlined (`points.tangent_call`)
                 tangent_call(laws, params, m_L, F_L, c_L, d)
                 tangent_call(laws, params, m_R, F_R, c_R, d)
