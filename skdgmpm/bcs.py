@@ -67,15 +67,16 @@ def star_state(frame, imposes_velocity, values, t_L, v_L, Z):
 def _star_states(d):                    # a literal d: the 2d x 2d system unrolled
     def star_states(frame, velocity, values, t_L, v_L, Z, t_s, v_s):
         for f in range(len(t_L)):
-            star_face(frame[f], velocity[f], values[f], t_L[f], v_L[f], Z[f], t_s[f], v_s[f], d)
+            star_face(frame, velocity, values, f, t_L[f], v_L[f], Z[f], t_s[f], v_s[f], d)
     return star_states
 
 
 @njit(cache=True, inline="always")
-def star_face(frame, velocity, values, t_L, v_L, Z, t_s, v_s, d):
-    """(t*, v*) of one face into t_s, v_s (d,), the rows of `star_state`'s arrays: its 2d x 2d
-    system (`equations._solve`). Also the boundary pass of first-order DGMPM
-    (`dgmpm_kernels.boundary_faces`)."""
+def star_face(frame, velocity, values, f, t_L, v_L, Z, t_s, v_s, d):
+    """(t*, v*) of face f into t_s, v_s (d,): its 2d x 2d system (`equations._solve`), its frame,
+    imposed components and values read in row f of `star_state`'s arrays (entries, not row
+    views: a view is reference counted, which cost the boundary pass more than its arithmetic).
+    Also the boundary pass of first-order DGMPM (`dgmpm_kernels.boundary_faces`)."""
     A, b, x = scratch((2 * d, 2 * d)), scratch((2 * d,)), scratch((2 * d,))
     for i in range(d):                  # unknowns x = [t*, v*]
         zv = 0.0
@@ -83,10 +84,10 @@ def star_face(frame, velocity, values, t_L, v_L, Z, t_s, v_s, d):
             A[i, j] = 1.0 if i == j else 0.0
             A[i, d + j] = -Z[i, j]
             zv += Z[i, j] * v_L[j]
-            A[d + i, j] = 0.0 if velocity[i] else frame[i, j]
-            A[d + i, d + j] = frame[i, j] if velocity[i] else 0.0
+            A[d + i, j] = 0.0 if velocity[f, i] else frame[f, i, j]
+            A[d + i, d + j] = frame[f, i, j] if velocity[f, i] else 0.0
         b[i] = t_L[i] - zv
-        b[d + i] = values[i]
+        b[d + i] = values[f, i]
     _solve(A, b, x, 2 * d)
     for i in range(d):
         t_s[i], v_s[i] = x[i], x[d + i]

@@ -183,11 +183,14 @@ class DGMPM(GodunovScheme):
         particle per cell the step's constitutive update writes those of its new state (the law's
         tangent at hand, no pass of their own), and ``_records_of`` = (U, Q) of the state they
         describe once the step is accepted; `interface_flux` computes them for any other state."""
-        d, slots = self.d, self.cell_normals.shape[1]
-        n_cells, face = len(self.cell_dofs), face_width(d, slots)
-        rest = split_width(d, slots, self.ctu is not None)
-        return ((self._buffer("records", (n_cells, face)), self._buffer("records' split parts", (n_cells, rest))),
-                self._buffer("record states", n_cells, np.int8))
+        shapes = self.__dict__.get("_record_shapes")
+        if shapes is None:              # face_width and split_width are compiled: asked once, not each step
+            d, slots, n_cells = self.d, self.cell_normals.shape[1], len(self.cell_dofs)
+            shapes = self._record_shapes = ((n_cells, face_width(d, slots)),
+                                            (n_cells, split_width(d, slots, self.ctu is not None)), (n_cells,))
+        face, rest, states = shapes
+        return ((self._buffer("records", face), self._buffer("records' split parts", rest)),
+                self._buffer("record states", states, np.int8))
 
     # ---------------------------------------------------------------- set-up
     def _setup_cell_faces(self):
@@ -203,6 +206,7 @@ class DGMPM(GodunovScheme):
         else:
             self.cell_dofs = np.argsort(self.dof_cell, kind="stable").astype(np.int32).reshape(n_cells, -1)
         self.local_face = tuple(_local_face(m, cells, f.facets).astype(np.int8) for cells in (f.cell_L, f.cell_R))
+        self.boundary_local_face = _local_face(m, self.boundary.cell_L, self.boundary.facets).astype(np.int8)
         normal = np.zeros((m.nfacets, self.d))
         normal[f.facets], normal[self.boundary.facets] = f.normal, self.boundary.normal
         normals = normal[m.t2f.T]                                   # (n_cells, faces, d)
@@ -347,14 +351,18 @@ class DGMPM(GodunovScheme):
         the transverse corrections per unit Delta t of the fluctuations entering the boundary
         cells added to the interior faces' ``corr`` and the boundary faces' ``corr_bnd``
         (`interface_flux`'s): like the interior faces', they depend on Delta t only through that
-        factor (`fixed_terms`). Returns the fluxes and (t*, v*)."""
+        factor (`fixed_terms`). A face whose cell is recorded reads its side in the cell records,
+        which `interface_flux` has just made or found for this state. Returns the fluxes and
+        (t*, v*)."""
         b, d, g, ctu = self.boundary, self.d, self.ghosts, self.ctu is not None
         nb, nc = len(b), system.n_components(d)
         flux, t_s, v_s = np.empty((nb, nc)), np.empty((nb, d)), np.empty((nb, d))
         parts = self._buffer("boundary parts", (nb if ctu else 0, 2, nc))
+        rec, state = self._records()
         args = (self.traces["boundary"], grid_state.U, grid_state.Q, self.density, b.normal, b.cell_L,
                 self.cell_material, *self.laws, (g.frame, g.velocity, g.values_at(time), g.copy), ctu,
-                self.topology["boundary"], flux, t_s, v_s, parts)
+                self.topology["boundary"], (rec, state, self.cell_normals, self.boundary_local_face), flux, t_s,
+                v_s, parts)
         bad = boundary_faces(*args)
         if bad >= 0:
             _not_hyperbolic(bad)
@@ -380,10 +388,8 @@ class DGMPM(GodunovScheme):
         filtered corrections for ``dt``; returns the power through them (W)."""
         b = self.boundary
         _, _, corr_bnd, flux, t_s, v_s = terms
-        work = np.empty(len(b))
-        boundary_terms(self.traces["boundary"], b.measure, b.normal, flux, t_s, v_s, self.ctu, corr_bnd, dt, weight,
-                       out, work)
-        return float(np.sum(work))
+        return boundary_terms(self.traces["boundary"], b.measure, b.normal, flux, t_s, v_s, self.ctu, corr_bnd, dt,
+                              weight, out)
 
     def side_topology(self, side):
         """CTU topology of one face side ("L", "R" of the interior faces, "boundary"): the

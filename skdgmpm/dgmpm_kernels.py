@@ -478,7 +478,8 @@ def boundary_edge_corrections(to_boundary, G, corr_bnd):
 
 
 # ---------------------------------------------------------------- boundary faces
-def boundary_faces(T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, flux, t_s, v_s, parts):
+def boundary_faces(T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, records, flux, t_s, v_s,
+                   parts):
     """Every boundary face's interior side (traction
     t_L, velocity v_L, impedance Z = sqrt(rho0 A_N), tangent C, density), its stationary state
     (t*, v*) into t_s, v_s (nf, d) (`bcs.star_face` under the face's condition, ``ghosts`` =
@@ -486,52 +487,90 @@ def boundary_faces(T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, c
     (nf,)), `bcs.BoundaryGhosts`), its flux F_N(t*, v*) into flux (nf, nc) and, with ``ctu``,
     the transverse corrections per unit Delta t of the fluctuation F_N(t*, v*) - F_N(t_L, v_L)
     entering the cell along its two edges adjacent to the face into parts (nf, 2, nc)
-    (`boundary_corrections` adds them where they go). Each face writes its own rows: chunks run
-    in parallel, each of an eighth of `parallel.MIN_ROWS` faces at least (a face costs about ten
-    interior faces: the law's tangent, its stationary state). Returns the first face whose
-    acoustic tensor, along the face or (CTU) an edge, is not positive definite, or -1."""
-    return parallel.chunked(len(N), _boundary_faces(N.shape[1], only_law(laws)), "lh" + "w" * 16,
-                            (T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, flux, t_s, v_s,
-                             parts), "first", max(1, parallel.MIN_ROWS // 8))
+    (`boundary_corrections` adds them where they go). ``records`` = (rec, state, normals, local
+    face of each face in its cell) (`cell_records`, the state's): a face whose cell is recorded
+    reads its side there (as an interior face does), another gathers its trace and evaluates
+    the law's tangent (a face then costs about ten interior faces). Each face writes its own rows:
+    chunks run in parallel, each of an eighth of `parallel.MIN_ROWS` faces at least. Returns the
+    first face whose acoustic tensor, along the face or (CTU) an edge, is not positive definite,
+    or -1."""
+    rec, state, normals, local = records
+    kernel = _boundary_faces(N.shape[1], normals.shape[1], only_law(laws))
+    return parallel.chunked(len(N), kernel, "lh" + "w" * 17,
+                            (T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, (rec, state, local),
+                             flux, t_s, v_s, parts), "first", max(1, parallel.MIN_ROWS // 8))
 
 
 @kernel_factory
-def _boundary_faces(d, only):
-    def boundary_faces(lo, hi, T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, flux, t_s,
-                       v_s, parts):
+def _boundary_faces(d, slots, only):
+    width = record_width(d, slots)
+
+    def boundary_faces(lo, hi, T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, records, flux,
+                       t_s, v_s, parts):
         dd, nc = d * d, d * d + d
         q, F, Zi, w = scratch((nc,)), scratch((3, 3)), scratch((d, d)), scratch((nc,))
         t_L, v_L, Z, C = scratch((d,)), scratch((d,)), scratch((d, d)), scratch((d, d, d, d))
+        r, n, t_f, v_f, o = scratch((width,)), scratch((d,)), scratch((d,)), scratch((d,)), scratch((nc,))
         frame, velocity, values, copy = ghosts
-        for f in range(lo, hi):
-            rho_f = _gather(T, f, U, Q, rho, q, F, d)
-            m = cell_material[cell[f]]
-            if d == 1:
-                tangent_call(laws, params, m, F, C, d)
+        rec, state, local = records
+        for f in range(lo, hi):         # rows copied into stack scratch, not viewed (views are reference counted)
+            c = cell[f]
+            for i in range(d):
+                n[i] = N[f, i]
+            recorded = state[c] != 0
+            if recorded:                    # the cell's record: its state, the impedance along this face
+                _copy_record(rec, c, r, d, slots, ctu)
+                if state[c] != 1:
+                    return f - lo
+                for k in range(nc):
+                    q[k] = r[k]
+                _record_impedance(r, local[f] % slots, Z, d)
+                rho_f = 1.0
             else:
-                tangent_point(laws, params, m, only, F, C, d)
-            traction(q, N[f], t_L, d)
+                rho_f = _gather(T, f, U, Q, rho, q, F, d)
+                m = cell_material[c]
+                if d == 1:
+                    tangent_call(laws, params, m, F, C, d)
+                else:
+                    tangent_point(laws, params, m, only, F, C, d)
+                if not impedance(C, n, rho_f, Z, Zi, d):
+                    return f - lo
+            traction(q, n, t_L, d)
             for i in range(d):
                 v_L[i] = q[dd + i]
-            if not impedance(C, N[f], rho_f, Z, Zi, d):
-                return f - lo
             if copy[f]:                     # nothing imposed: the ghost is the interior
                 for i in range(d):
-                    t_s[f, i], v_s[f, i] = t_L[i], v_L[i]
+                    t_f[i], v_f[i] = t_L[i], v_L[i]
             else:
-                star_face(frame[f], velocity[f], values[f], t_L, v_L, Z, t_s[f], v_s[f], d)
+                star_face(frame, velocity, values, f, t_L, v_L, Z, t_f, v_f, d)
             for k in range(nc):
-                flux[f, k] = 0.0
-            add_normal_flux(t_s[f], v_s[f], N[f], 1.0, flux[f], d)
+                o[k] = 0.0
+            add_normal_flux(t_f, v_f, n, 1.0, o, d)
+            for i in range(d):
+                t_s[f, i], v_s[f, i] = t_f[i], v_f[i]
+            for k in range(nc):
+                flux[f, k] = o[k]
             if d == 2 and ctu:              # the fluctuation F_N(t*, v*) - F_N(t_L, v_L) entering the cell
                 for k in range(6):
-                    w[k] = flux[f, k]
-                add_normal_flux(t_L, v_L, N[f], -1.0, w, d)
-                h, normals = topo[0], topo[1]
-                ok, G_0, G_1 = ctu_split(w, C, rho_f, -1.0 / (2.0 * h[f]), normals[0, f, 0], normals[0, f, 1],
-                                         normals[1, f, 0], normals[1, f, 1])
-                if not ok:
-                    return f - lo
+                    w[k] = o[k]
+                add_normal_flux(t_L, v_L, n, -1.0, w, d)
+                h, edges = topo[0], topo[1]
+                scale = -1.0 / (2.0 * h[f])
+                if recorded:                # the record's impedances along the edges: the same numbers
+                    _record_tangent(r, C, d, slots)
+                    k_f, inv_rho = local[f], r[_inv_rho_at(2, slots)]
+                    if slots == 2:
+                        G_0, G_1 = ctu_parts_opposite(w, C, inv_rho, scale, edges[0, f, 0], edges[0, f, 1],
+                                                      _record_pair(r, slots, _edge_slot(k_f, 0, slots)))
+                    else:
+                        G_0, G_1 = ctu_parts(w, C, inv_rho, scale, edges[0, f, 0], edges[0, f, 1], edges[1, f, 0],
+                                             edges[1, f, 1], _record_pair(r, slots, _edge_slot(k_f, 0, slots)),
+                                             _record_pair(r, slots, _edge_slot(k_f, 1, slots)))
+                else:
+                    ok, G_0, G_1 = ctu_split(w, C, rho_f, scale, edges[0, f, 0], edges[0, f, 1], edges[1, f, 0],
+                                             edges[1, f, 1])
+                    if not ok:
+                        return f - lo
                 for k in range(6):
                     parts[f, 0, k], parts[f, 1, k] = G_0[k], G_1[k]
         return -1
@@ -560,14 +599,17 @@ def boundary_corrections(topo, parts, corr, corr_bnd):
         _add_boundary_edges(edge_bnd, f, parts[f, 0], parts[f, 1], corr_bnd)
 
 
-def boundary_terms(T, measure, N, flux, t_s, v_s, ctu, corr_bnd, dt, weight, R, work):
+def boundary_terms(T, measure, N, flux, t_s, v_s, ctu, corr_bnd, dt, weight, R):
     """R += w (-int Phi F over the boundary faces), F their flux (nf, nc) plus, where a CTU filter
     (nf, nc, nc) is given as ``ctu``, its filtered corrections ctu (dt corr_bnd) (`DGMPM.
-    transverse_flux`), weighted per node by w = (step, inv_M) as in `_integrate`; the power
-    through each face, measure t . v (t = P N, v its velocity: (t*, v*) without CTU, read off
-    F with it), into work (nf,)."""
-    _boundary_terms(N.shape[1], ctu is not None)(T, measure, N, flux, t_s, v_s, _NO_FILTER if ctu is None else ctu,
-                                                 corr_bnd, dt, weight, R, work)
+    transverse_flux`), weighted per node by w = (step, inv_M) as in `_integrate`; returns the
+    power through the boundary, the sum over the faces in order of measure t . v (t = P N, v its
+    velocity: (t*, v*) without CTU, read off F with it), summed here: numpy's sum of an array of
+    the faces' powers after the pass took 48-65 µs of a 256² step (line_profiler; numpy's reduce
+    out of the caches after the passes), more than the pass. One pass on one thread: a few
+    thousand faces."""
+    return _boundary_terms(N.shape[1], ctu is not None)(T, measure, N, flux, t_s, v_s,
+                                                        _NO_FILTER if ctu is None else ctu, corr_bnd, dt, weight, R)
 
 
 _NO_FILTER = np.zeros((0, 0, 0))
@@ -575,9 +617,10 @@ _NO_FILTER = np.zeros((0, 0, 0))
 
 @kernel_factory
 def _boundary_terms(d, ctu):
-    def boundary_terms(T, measure, N, flux, t_s, v_s, filt, corr_bnd, dt, weight, R, work):
+    def boundary_terms(T, measure, N, flux, t_s, v_s, filt, corr_bnd, dt, weight, R):
         dd, nc = d * d, d * d + d
         g, c = scratch((nc,)), scratch((nc,))
+        power = 0.0
         for f in range(len(measure)):
             e = 0.0
             if ctu:
@@ -598,8 +641,9 @@ def _boundary_terms(d, ctu):
                     g[k] = flux[f, k]
                 for i in range(d):
                     e += t_s[f, i] * v_s[f, i]
-            work[f] = measure[f] * e
+            power += measure[f] * e
             _integrate(T, f, -1.0 * measure[f], g, weight, R)
+        return power
     return boundary_terms
 
 

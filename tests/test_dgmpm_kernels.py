@@ -76,6 +76,29 @@ def test_interior_pass_matches_batched_path(transverse, uniform):
     assert np.all(np.abs(corr_bnd - ref_bnd) <= 1e-12 * np.abs(ref).max())
 
 
+@pytest.mark.parametrize("uniform", ["all", "half"])
+@pytest.mark.parametrize("transverse", ["dcu", "ctu"])
+def test_boundary_pass_reads_a_recorded_cell_as_its_trace(transverse, uniform):
+    """A boundary face whose cell is recorded takes its side (state, impedance, and for CTU the
+    tangent and the edges' impedances) from the cell's record; the same face computed from its
+    trace and the law's tangent (the record states set to 0: no cell recorded) gives the same
+    stationary states, fluxes and CTU corrections (an independent path through the law)."""
+    st = _stepper(transverse)
+    g = _random_state(st, uniform=UNIFORM[uniform](len(st.cell_dofs)))
+    _, corr, corr_bnd = st.interface_flux(g)
+    _, state = st._records()
+    assert np.any(state[st.boundary.cell_L] == 1)          # some boundary faces read a record
+    made = {}
+    for path in ("records", "traces"):
+        if path == "traces":
+            state[:] = 0
+        c, c_bnd = corr.copy(), corr_bnd.copy()
+        made[path] = (*st.boundary_flux(g, 1e-6, c, c_bnd), c, c_bnd)
+    for mine, ref in zip(made["records"], made["traces"]):
+        assert mine.shape == ref.shape
+        if ref.size:                    # DCU: no interior corrections
+            assert np.all(np.abs(mine - ref) <= 1e-12 * np.abs(ref).max())
+
 
 def test_a_recorded_cell_that_is_not_hyperbolic_stops_the_pass_at_its_first_face():
     """A cell whose nodes hold one state with a negative density (rho A_n negative definite): its
