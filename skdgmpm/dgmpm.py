@@ -121,6 +121,10 @@ class DGMPM(GodunovScheme):
         self._setup_boundary(g.element)
         self._setup_cell_faces()
         self._setup_transverse()
+        # the records' shapes (`_records`): face_width and split_width are compiled, asked once
+        slots, ctu = self.cell_normals.shape[1], self.ctu is not None
+        self._record_shapes = ((n_cells, face_width(self.d, slots)), (n_cells, split_width(self.d, slots, ctu)),
+                               (n_cells,))
         self.laws = law_table(self.materials.materials)          # the compiled point laws
         f = self.interior
         if self.cellwise:       # a boundary face's side: its cell's particle (weight 1: the same bits)
@@ -183,12 +187,7 @@ class DGMPM(GodunovScheme):
         particle per cell the step's constitutive update writes those of its new state (the law's
         tangent at hand, no pass of their own), and ``_records_of`` = (U, Q) of the state they
         describe once the step is accepted; `interface_flux` computes them for any other state."""
-        shapes = self.__dict__.get("_record_shapes")
-        if shapes is None:              # face_width and split_width are compiled: asked once, not each step
-            d, slots, n_cells = self.d, self.cell_normals.shape[1], len(self.cell_dofs)
-            shapes = self._record_shapes = ((n_cells, face_width(d, slots)),
-                                            (n_cells, split_width(d, slots, self.ctu is not None)), (n_cells,))
-        face, rest, states = shapes
+        face, rest, states = self._record_shapes
         return ((self._buffer("records", face), self._buffer("records' split parts", rest)),
                 self._buffer("record states", states, np.int8))
 
