@@ -4,6 +4,7 @@ forms/, materials/ and cases/ sit at the top of the repository and are installed
 skdgmpm.forms, skdgmpm.materials and skdgmpm.cases (pyproject.toml's package-dir mapping; in a
 checkout: ``pip install -e .``). The compiled kernels are cached on disk by `kernel_cache`.
 """
+from . import _uids  # noqa: F401  (numba's function numbers, unique across processes: before any compilation)
 from . import kernel_cache as _kernel_cache
 
 __version__ = "0.1.0"
