@@ -1,7 +1,7 @@
 """The bad-input table of issue 17: 167 bad or extreme inputs through `skdgmpm run` (and a few
 other commands), each classified as a one-line error with exit 2, a traceback, accepted (exit 0),
 or a health stop (exit 3). Run from anywhere: python tests/bad_input_table.py (a few minutes)."""
-import contextlib, io, os, sys, tempfile, traceback, warnings
+import contextlib, io, os, sys, tempfile, warnings
 from pathlib import Path
 import numpy as np, meshio
 ROOT = Path(__file__).resolve().parent.parent

@@ -263,7 +263,7 @@ def test_multiholed_j2_cell_runs_to_its_end_time():
     to hole 3 (between it and the loaded face) has flowed most."""
     r = run("multiholed_cell_j2_2d", MH, progress=False, frames=1)
     assert r.status == "ok", r.message
-    h, f, X = r.history, r.fields(), r.X
+    h, f = r.history, r.fields()
     assert r.state.t == pytest.approx(1.2e-5, rel=1e-12)
     assert balance_never_grows(r)
     assert np.all(np.diff(h["dissipated"]) >= 0) and h["dissipated"][-1] > 0
