@@ -28,9 +28,13 @@ def _indexes(root):
     """{index path: (version, stamp, {key: data file name})} of a numba cache folder tree."""
     out = {}
     for idx in sorted(Path(root).rglob("*.nbi")):
-        with open(idx, "rb") as f:
-            version = pickle.load(f)
-            stamp, overloads = pickle.loads(f.read())
+        try:
+            with open(idx, "rb") as f:
+                version = pickle.load(f)
+                stamp, overloads = pickle.loads(f.read())
+        except Exception as exc:        # unreadable (another numba's format, a write cut short): numba recompiles it
+            print(f"cache_repair: {idx}: not read ({type(exc).__name__}), left as it is")
+            continue
         out[idx] = (version, stamp, overloads)
     return out
 

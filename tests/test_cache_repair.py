@@ -53,3 +53,11 @@ def test_variants_sharing_a_symbol_are_removed_with_what_embeds_them(tmp_path):
     assert list(left.values()) == ["parallel._loop.locals.loop-5.py311.2.nbc"]
     assert cache_repair.colliding_symbols(tmp_path) == set()
     assert cache_repair.main(["--check", str(tmp_path)]) == 0
+
+
+def test_an_unreadable_index_is_left_as_it_is(tmp_path, capsys):
+    """An index that does not unpickle (a write cut short) is named and skipped, not a traceback:
+    CI runs the repair before the tests."""
+    (tmp_path / "mod.f-3.py311.nbi").write_bytes(b"not a pickle")
+    assert cache_repair.repair(tmp_path) == []
+    assert "mod.f-3.py311.nbi: not read" in capsys.readouterr().out
