@@ -226,12 +226,27 @@ def kernel_factory(factory=None, *, parallel=False):
         try:
             return kernels[sizes]
         except KeyError:
-            k = kernels[sizes] = njit(cache=True, nogil=True, parallel=parallel)(factory(*sizes))
+            body = factory(*sizes)
+            body.__qualname__ = variant_qualname(body.__qualname__, sizes)
+            k = kernels[sizes] = njit(cache=True, nogil=True, parallel=parallel)(body)
             k.kernel_name = f"{factory.__module__}.{factory.__qualname__}{sizes!r}"
             return k
 
     kernel.kernels = kernels
     return kernel
+
+
+def variant_qualname(qualname, sizes):
+    """The qualified name of a factory's kernel for ``sizes``: its own, so that its symbol (numba
+    names a compiled function by qualified name, a per-process number and argument types) and its
+    cache index differ from every other variant's, whichever process compiled them (two variants
+    under one symbol ran one another's code: docs/bench/session29.md §5). The sizes as a short
+    readable tag and a hash of them (a chunk loop's size is a long key), in [A-Za-z0-9_]: the name
+    is part of the index's file name."""
+    if not sizes:
+        return qualname
+    readable = re.sub(r"[^A-Za-z0-9]+", "_", "_".join(map(str, sizes))).strip("_")[:32]
+    return f"{qualname}_{readable}_{hashlib.sha256(repr(sizes).encode()).hexdigest()[:12]}"
 
 
 # ---------------------------------------------------------------- scratch arrays of a kernel

@@ -164,3 +164,50 @@ PER_D = ("import json, numpy as np; from skdgmpm import system, riemann\n"
 def test_a_scene_compiles_the_kernels_of_its_own_dimension_only(tmp_path):
     (embed, impedances, volume_flux), _ = python(PER_D, cwd=tmp_path)
     assert embed == impedances == [[1]] and volume_flux == []
+
+
+VARIANTS = '''
+from skdgmpm.kernel_cache import kernel_factory
+
+
+@kernel_factory
+def _scaled(k):
+    def scaled(x):
+        return k * x
+    return scaled
+'''
+
+# compile (or load) the variants asked for, numba's function numbering from 1 as in every process
+# before `skdgmpm._uids` (only the variants' own names keep their symbols apart then)
+COMPILE = ("import itertools, json, sys; import skdgmpm; from numba.core import bytecode\n"
+           "bytecode.FunctionIdentity._unique_ids = itertools.count(1)\n"
+           "import variants\n"
+           "ks = [variants._scaled(int(a)) for a in sys.argv[1:]]\n"
+           "values = [k(1.0) for k in ks]\n"
+           "print(json.dumps([values, [sum(k.stats.cache_hits.values()) for k in ks], "
+           "[k.py_func.__qualname__ for k in ks]]))")
+
+
+def test_each_variant_of_a_factory_has_its_own_name_whichever_process_compiled_it(tmp_path):
+    """Two variants of one factory with the same argument types, each compiled first thing in a
+    process of its own with numba's numbering from 1: their qualified names, hence their symbols
+    and cache indexes, differ (docs/bench/session29.md §5: two variants under one symbol, and one
+    ran the other's code), and loaded together each runs its own code."""
+    (tmp_path / "variants.py").write_text(VARIANTS)
+    cache = tmp_path / "cache"
+
+    def run(*sizes):
+        env = {**os.environ, "NUMBA_CACHE_DIR": str(cache), "PYTHONPATH": str(tmp_path)}
+        out = subprocess.run([sys.executable, "-c", COMPILE, *map(str, sizes)], cwd=tmp_path, env=env,
+                             capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr
+        return json.loads(out.stdout.strip().splitlines()[-1])
+
+    assert run(2)[0] == [2.0] and run(3)[0] == [3.0]            # each compiled in its own process
+    values, hits, names = run(2, 3)
+    assert hits == [1, 1]                                       # both loaded from the cache
+    assert values == [2.0, 3.0]
+    assert len(list(cache.rglob("*scaled_2_*.nbi"))) == len(list(cache.rglob("*scaled_3_*.nbi"))) == 1
+    assert len(set(names)) == 2 and all(re.fullmatch(r"_scaled\.<locals>\.scaled_\d_[0-9a-f]{12}", n) for n in names)
+    assert kernel_cache.variant_qualname("f", ()) == "f"
+    assert kernel_cache.variant_qualname("f", (1,)) != kernel_cache.variant_qualname("f", (-1,))
