@@ -389,16 +389,24 @@ def _split_into(w, C, r, k, topo, f, G, part, slots):
     side of face f, local face k of the side's cell with record r: its parts for the cell's two
     edges adjacent to the face (local faces k + 1, k + 3) into G[f, part] and G[f, part + 1]."""
     h, normals = topo
-    if slots == 2:                      # the two edges are opposite (parallel pairs): one impedance
-        G_0, G_1 = ctu_parts_opposite(w, C, r[_inv_rho_at(2, slots)], -1.0 / (2.0 * h[f]), normals[f, 0, 0],
-                                      normals[f, 0, 1], _record_pair(r, slots, _edge_slot(k, 0, slots)))
-    else:
-        G_0, G_1 = ctu_parts(w, C, r[_inv_rho_at(2, slots)], -1.0 / (2.0 * h[f]), normals[f, 0, 0], normals[f, 0, 1],
-                             normals[f, 1, 0], normals[f, 1, 1], _record_pair(r, slots, _edge_slot(k, 0, slots)),
-                             _record_pair(r, slots, _edge_slot(k, 1, slots)))
+    G_0, G_1 = _record_parts(w, C, r, -1.0 / (2.0 * h[f]), normals[f, 0, 0], normals[f, 0, 1], normals[f, 1, 0],
+                             normals[f, 1, 1], k, slots)
     for c in range(6):
         G[f, part, c] = G_0[c]
         G[f, part + 1, c] = G_1[c]
+
+
+@njit(cache=True, inline="always")
+def _record_parts(w, C, r, scale, a0, a1, b0, b1, k, slots):
+    """`equations.ctu_parts` of w entering a cell through its local face k, along the cell's two
+    edges adjacent to it (local faces k + 1, k + 3; outward normals (a0, a1), (b0, b1)), from the
+    cell's split record r (C its tangent): the two parts. With two face directions the edges are
+    opposite and share one impedance (`equations.ctu_parts_opposite`)."""
+    if slots == 2:
+        return ctu_parts_opposite(w, C, r[_inv_rho_at(2, slots)], scale, a0, a1,
+                                  _record_pair(r, slots, _edge_slot(k, 0, slots)))
+    return ctu_parts(w, C, r[_inv_rho_at(2, slots)], scale, a0, a1, b0, b1,
+                     _record_pair(r, slots, _edge_slot(k, 0, slots)), _record_pair(r, slots, _edge_slot(k, 1, slots)))
 
 
 # ---------------------------------------------------------------- CTU parts summed by the cells
@@ -439,12 +447,8 @@ def _cell_corrections(slots):
             for e in range(2):                  # edges e, e + 2 <- faces e + 1, e + 3
                 for i in range(6):
                     S[i] = w[e + 1, i] + w[(e + 3) % 4, i]
-                if slots == 2:              # edges e, e + 2 opposite (parallel pairs): one impedance
-                    G_a, G_b = ctu_parts_opposite(S, C, r[_inv_rho_at(2, slots)], 1.0, n[e, 0], n[e, 1],
-                                                  _record_pair(r, slots, e))
-                else:
-                    G_a, G_b = ctu_parts(S, C, r[_inv_rho_at(2, slots)], 1.0, n[e, 0], n[e, 1], n[e + 2, 0],
-                                         n[e + 2, 1], _record_pair(r, slots, e), _record_pair(r, slots, e + 2))
+                # edges e, e + 2: those adjacent to local face e + 3
+                G_a, G_b = _record_parts(S, C, r, 1.0, n[e, 0], n[e, 1], n[e + 2, 0], n[e + 2, 1], e + 3, slots)
                 for q in range(2):
                     s = sources[c, e + 2 * q]
                     for i in range(6):
@@ -558,14 +562,8 @@ def _boundary_faces(d, slots, only):
                 scale = -1.0 / (2.0 * h[f])
                 if recorded:                # the record's impedances along the edges: the same numbers
                     _record_tangent(r, C, d, slots)
-                    k_f, inv_rho = local[f], r[_inv_rho_at(2, slots)]
-                    if slots == 2:
-                        G_0, G_1 = ctu_parts_opposite(w, C, inv_rho, scale, edges[0, f, 0], edges[0, f, 1],
-                                                      _record_pair(r, slots, _edge_slot(k_f, 0, slots)))
-                    else:
-                        G_0, G_1 = ctu_parts(w, C, inv_rho, scale, edges[0, f, 0], edges[0, f, 1], edges[1, f, 0],
-                                             edges[1, f, 1], _record_pair(r, slots, _edge_slot(k_f, 0, slots)),
-                                             _record_pair(r, slots, _edge_slot(k_f, 1, slots)))
+                    G_0, G_1 = _record_parts(w, C, r, scale, edges[0, f, 0], edges[0, f, 1], edges[1, f, 0],
+                                             edges[1, f, 1], local[f], slots)
                 else:
                     ok, G_0, G_1 = ctu_split(w, C, rho_f, scale, edges[0, f, 0], edges[0, f, 1], edges[1, f, 0],
                                              edges[1, f, 1])
