@@ -67,6 +67,25 @@ def _cmd_list(args):
     return 0
 
 
+def _cmd_cache(args):
+    from . import cache_folders, kernel_cache
+
+    base = kernel_cache.cache_base()
+    if args.prune:
+        removed, failed = cache_folders.prune(base)
+        for path, size in removed:
+            print(f"removed {path}  ({size / 2 ** 20:.1f} MiB)")
+        for path, reason in failed:
+            print(f"warning: could not remove {path}: {reason}", file=sys.stderr)
+        print(f"{len(removed)} folder(s) removed, {sum(size for _, size in removed) / 2 ** 20:.1f} MiB; "
+              f"kept {kernel_cache.cache_dir()}")
+        return 0
+    print(f"compiled kernels under {base} (these sources: {kernel_cache.cache_dir()})")
+    for line in cache_folders.report(cache_folders.folders(base)):
+        print(line)
+    return 0
+
+
 def _cmd_scenes(args):
     from . import scene_keys
     from .scene import copy_scene, find_scene
@@ -342,6 +361,11 @@ def main(argv=None):
     q = actions.add_parser("schema", help="every scene key: type, unit, default, example, methods (docs/scenes.md)")
     q.add_argument("--markdown", action="store_true", help="the Markdown of docs/scenes.md")
     p.set_defaults(func=_cmd_scenes)
+
+    p = sub.add_parser("cache", help="list the compiled kernels' folders on disk (one per source version)")
+    p.add_argument("--prune", action="store_true",
+                   help="remove every folder but the one of these sources (others compile again when used)")
+    p.set_defaults(func=_cmd_cache)
 
     p = sub.add_parser("stability", help="1D von Neumann analysis of a particle layout (R18 §6)")
     p.add_argument("--layout", required=True, help="parent coordinates in a cell, e.g. 0.25,0.75")

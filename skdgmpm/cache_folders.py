@@ -1,0 +1,62 @@
+"""The compiled kernels' folders on disk: one per source digest (`kernel_cache.cache_dir`), listed
+and pruned (``skdgmpm cache [--prune]``).
+
+Every edit of a file with compiled code, and every release, files its kernels under a new digest
+(60-70 MB for every method and dimension); the folders of other digests stay until removed: a
+second checkout or venv with other sources uses its own. Only folders named ``kernels-<16 hex
+digits>`` directly under the cache's base are touched, never anything else there (the base may be
+a $NUMBA_CACHE_DIR that other code shares).
+"""
+import os
+import re
+import shutil
+import time
+from pathlib import Path
+
+from . import kernel_cache
+
+_FOLDER = re.compile(r"kernels-[0-9a-f]{16}")
+
+
+def folders(base=None):
+    """[(path, bytes, last written (epoch s), current?)] of the kernel folders under ``base`` (the
+    cache's, `kernel_cache.cache_base`, by default), the most recently written first."""
+    base = Path(base or kernel_cache.cache_base())
+    current = os.path.basename(kernel_cache.cache_dir())
+    rows = []
+    if base.is_dir():
+        for path in base.iterdir():
+            if path.is_dir() and not path.is_symlink() and _FOLDER.fullmatch(path.name):
+                files = [f for f in path.rglob("*") if f.is_file()]
+                size = sum(f.stat().st_size for f in files)
+                written = max((f.stat().st_mtime for f in files), default=path.stat().st_mtime)
+                rows.append((path, size, written, path.name == current))
+    return sorted(rows, key=lambda row: (not row[3], -row[2]))
+
+
+def prune(base=None):
+    """Remove every kernel folder under ``base`` but the current sources' (`folders`); returns the
+    removed [(path, bytes)] and those that could not be, [(path, reason)] (e.g. another user's)."""
+    removed, failed = [], []
+    for path, size, _, current in folders(base):
+        if not current:
+            try:
+                shutil.rmtree(path)
+            except OSError as exc:
+                failed.append((path, exc.strerror or str(exc)))
+            else:
+                removed.append((path, size))
+    return removed, failed
+
+
+def report(rows, now=None):
+    """Lines describing `folders`' rows, and their total."""
+    now = time.time() if now is None else now
+    lines = []
+    for path, size, written, current in rows:
+        days = (now - written) / 86400
+        age = "today" if days < 1 else f"{days:.0f} days ago"
+        lines.append(f"{path}  {size / 2 ** 20:7.1f} MiB  written {age}" + ("  (these sources)" if current else ""))
+    total = sum(row[1] for row in rows)
+    lines.append(f"{len(rows)} folder(s), {total / 2 ** 20:.1f} MiB")
+    return lines
