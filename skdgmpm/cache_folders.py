@@ -10,6 +10,7 @@ a $NUMBA_CACHE_DIR that other code shares).
 import os
 import re
 import shutil
+import stat
 import time
 from pathlib import Path
 
@@ -27,11 +28,19 @@ def folders(base=None):
     if base.is_dir():
         for path in base.iterdir():
             if path.is_dir() and not path.is_symlink() and _FOLDER.fullmatch(path.name):
-                files = [f for f in path.rglob("*") if f.is_file()]
-                size = sum(f.stat().st_size for f in files)
-                written = max((f.stat().st_mtime for f in files), default=path.stat().st_mtime)
+                stats = [st for st in map(_stat, path.rglob("*")) if st is not None and stat.S_ISREG(st.st_mode)]
+                size = sum(st.st_size for st in stats)
+                written = max((st.st_mtime for st in stats), default=path.stat().st_mtime)
                 rows.append((path, size, written, path.name == current))
     return sorted(rows, key=lambda row: (not row[3], -row[2]))
+
+
+def _stat(path):
+    """os.stat of a file, None where it is gone (a process compiling beside this one replaces files)."""
+    try:
+        return path.stat()
+    except OSError:
+        return None
 
 
 def prune(base=None):
@@ -55,7 +64,7 @@ def report(rows, now=None):
     lines = []
     for path, size, written, current in rows:
         days = (now - written) / 86400
-        age = "today" if days < 1 else f"{days:.0f} days ago"
+        age = "today" if days < 1 else "1 day ago" if days < 2 else f"{days:.0f} days ago"
         lines.append(f"{path}  {size / 2 ** 20:7.1f} MiB  written {age}" + ("  (these sources)" if current else ""))
     total = sum(row[1] for row in rows)
     lines.append(f"{len(rows)} folder(s), {total / 2 ** 20:.1f} MiB")

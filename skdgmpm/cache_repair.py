@@ -9,9 +9,9 @@ but loaded into one process the second links to the first's code. Seen: a DCU st
 step ran CTU's cell records (25 numbers a record more) into DCU's empty split parts, and glibc
 aborted (free(): invalid next size; docs/bench/session29.md §5).
 
-Since `skdgmpm._uids` each process numbers from its own random start, and since each variant
-compiles under a qualified name of its own (`kernel_cache.variant_qualname`), so new compilations
-no longer clash; caches made before hold such pairs. `colliding_symbols` lists the symbols that two
+Since `skdgmpm._uids` each process numbers from its own random start, and each variant compiles
+under a qualified name of its own (`kernel_cache.variant_qualname`): new compilations no longer
+clash, but caches made before may hold such pairs. `colliding_symbols` lists the symbols that two
 variants of one index define; `repair` removes them and every cached library that embeds one (a
 chunk loop carries the kernels it calls), so that they are compiled again. ``python -m
 skdgmpm.cache_repair [--check] [ROOT]`` (ROOT: the cache of these sources, `kernel_cache.cache_dir`).
