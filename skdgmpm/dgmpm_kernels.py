@@ -523,12 +523,10 @@ def _boundary_faces(d, slots, only):
                 n[i] = N[f, i]
             recorded = state[c] != 0
             if recorded:                    # the cell's record: its state, the impedance along this face
-                _copy_record(rec, c, r, d, slots, ctu)
-                if state[c] != 1:
+                if not _copy_side(rec, state, c, local[f] % slots, q, Z, d):
                     return f - lo
-                for k in range(nc):
-                    q[k] = r[k]
-                _record_impedance(r, local[f] % slots, Z, d)
+                if ctu:                     # and its split part, for the corrections
+                    _copy_record(rec, c, r, d, slots, True)
                 rho_f = 1.0
             else:
                 rho_f = _gather(T, f, U, Q, rho, q, F, d)
