@@ -8,7 +8,7 @@ from numba import njit
 
 from skdgmpm.materials.points import law_table, only_law, stress_tangent_point, stress_update_point, tangent_call
 
-from .dgmpm_kernels import record_width, write_record
+from .dgmpm_kernels import CellRows, cell_row, record_width, write_record
 from .equations import embed as _embed_point, flux_state
 from .health import Health, health_point, identity_if_not, summarise, tally
 from .parallel import row_product
@@ -28,8 +28,9 @@ def law_point(laws, params, m, only, u, h_n, h, rho, F, P, q, d):
 
 
 @kernel_factory
-def _states(d, assess, gathered, slots, split, only):  # literals: the loops unrolled, the health computed or not,
-    dd, nc = d * d, d * d + d                       # U read or gathered, the face records (slots > 0) or not, one law
+def _states(d, assess, gathered, slots, split, only, sides, n_faces):   # literals: the loops unrolled, the health
+    dd, nc = d * d, d * d + d           # computed or not, U read ("") or formed ("csr", "cells": sides and faces
+                                        # of the cell rows), the face records (slots > 0) or not, one law
     width = record_width(d, slots, split) if slots else 1
 
     def states(laws, params, index, U, rho, h_n, h, Q, health, motion, gather, records):
@@ -38,22 +39,27 @@ def _states(d, assess, gathered, slots, split, only):  # literals: the loops unr
         ``assess``, also the point's health (`skdgmpm.health.health_point`) at the law's tangent,
         into ``health`` = (finite, J, lowest, speed, densities of the materials), and its position
         moved with the material, x + dt (v_old + v) / 2 (trapezoidal), ``motion`` = (x, v_old,
-        dt / 2, new x). With ``gathered``, each point's U is first its row of a sparse product,
-        ``gather`` = (CSR rows of the points, nodal values) (`parallel.row_product`), written into U.
+        dt / 2, new x). With ``gathered``, each point's U is first formed and written into U: "csr",
+        its row of a sparse product, ``gather`` = (CSR rows of the points, nodal values)
+        (`parallel.row_product`); "cells", its row of a forward Euler stage with one particle per
+        cell, ``gather`` a `dgmpm_kernels.CellRows` (`cell_row`).
         With ``slots`` (and ``assess``), also each point's face record at the law's tangent
         (`skdgmpm.dgmpm_kernels.write_record`, its ``slots`` face directions, the split part with
         ``split``) into row row[k] of ``records`` = (rec, row, normals, record states): DGMPM with
         one particle per cell reads its cells' records from the pass that made their states."""
         F, P, u, C = scratch((3, 3)), scratch((d, d)), scratch((nc,)), scratch((d, d, d, d))
-        n_c, r, q = scratch((max(slots, 1), d)), scratch((width,)), scratch((nc,))
+        n_c, r, q, s = scratch((max(slots, 1), d)), scratch((width,)), scratch((nc,)), scratch((nc,))
         first, J_min, omega_min, fastest = -1, np.inf, np.inf, -np.inf
         n_h = h_n.shape[1]
         h_k_n, h_k = scratch((n_h,)), scratch((n_h,))
         finite, J, lowest, speed, rho_m = health
         for k in range(len(U)):
-            if gathered:
+            if gathered == "csr":
                 indptr, indices, data, nodal = gather
                 row_product(indptr, indices, data, nodal, k, u, nc)
+            elif gathered == "cells":
+                cell_row(gather, k, s, u, nc, sides, n_faces)
+            if gathered:
                 for c in range(nc):
                     U[k, c] = u[c]
             else:
@@ -212,7 +218,8 @@ class MaterialSet:
         state read once): (Q, history, Health, x). ``motion`` = (x (n, dim), v_old (n, dim), dt):
         the positions moved by the trapezoidal rule, x + dt (v_old + v) / 2. ``gather`` = (A CSR,
         nodal values): the points' states are A @ nodal, computed row by row in the pass and
-        written into U (the same bits as `parallel.matmul`). ``records`` = (rec, row, normals,
+        written into U (the same bits as `parallel.matmul`); or a `dgmpm_kernels.CellRows`: the
+        points' states are its rows (the same bits as `dgmpm_kernels.cell_update`). ``records`` = (rec, row, normals,
         record states): each point's face record also written, into row row[k] of rec = (face
         parts, split parts) (rows distinct: `_states`; the split parts' width says whether the
         records hold them)."""
@@ -239,16 +246,19 @@ class MaterialSet:
         else:
             slots = records[2].shape[1]
             split = records[0][1].shape[1] > 0
-        (laws, params), kernel = self.laws, _states(d, assess, gather is not None, slots, split, only_law(self.laws[0]))
-        if gather is None:
-            A, nodal = _no_gather(n, U.shape[1])
+        if isinstance(gather, CellRows):
+            gathered, (_, sides, n_faces), spec = "cells", gather.sizes, CellRows.SPEC
+            gather = tuple(gather)
         else:
-            A, nodal = parallel.csr(gather[0]), gather[1]
+            A, nodal = _no_gather(n, U.shape[1]) if gather is None else (parallel.csr(gather[0]), gather[1])
+            gathered, sides, n_faces, spec = "" if gather is None else "csr", 0, 0, "(iwww)"
+            gather = (*A, nodal)
+        (laws, params), kernel = self.laws, _states(d, assess, gathered, slots, split, only_law(self.laws[0]), sides,
+                                                    n_faces)
         index, rho = np.asarray(index, dtype=np.int64), np.asarray(rho, dtype=float)
         # health and motion empty without assess, the records' rows without slots: their chunks empty
-        results = parallel.chunked(n, kernel, "wwrrrrrr(rrrrw)(rrwr)(iwww)(wrww)",
-                                   (laws, params, index, U, rho, history, h, Q, health, moved, (*A, nodal), records),
-                                   4)
+        results = parallel.chunked(n, kernel, f"wwrrrrrr(rrrrw)(rrwr){spec}(wrww)",
+                                   (laws, params, index, U, rho, history, h, Q, health, moved, gather, records), 4)
         if not assess:
             return Q, h
         finite, J, lowest, speed, _ = health

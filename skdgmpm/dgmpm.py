@@ -29,9 +29,10 @@ With forward Euler and one particle strictly inside every cell (R18's usual layo
 "auto", `DGMPM._cellwise`), (a), (c), (f) and (g) reduce exactly: the projection puts the
 particle's state at the cell's nodes, the volume term sums to zero over them and the back map of
 the Euler stage is U_p + dt / V_p (sum of the cell's face fluxes). The step then runs on the
-particles' own arrays (the cell records read the particle, `dgmpm_kernels.cell_update` is (f)-(g))
-and keeps no nodal array, operator or trace: the same numbers up to round-off
-(tests/test_layout.py), a third of the memory and half the passes.
+particles' own arrays (the cell records read the particle; (f)-(g) is each particle's row,
+`dgmpm_kernels.cell_row`, formed by the law's pass where it reads the particle's new state: one
+pass over the particles, not two) and keeps no nodal array, operator or trace: the same numbers
+up to round-off (tests/test_layout.py), a third of the memory and half the passes.
 """
 from dataclasses import dataclass, field
 
@@ -41,7 +42,7 @@ import scipy.sparse as sp
 from skdgmpm.materials.points import law_table
 
 from . import parallel, system
-from .dgmpm_kernels import (boundary_corrections, boundary_edge_corrections, boundary_faces, boundary_terms,
+from .dgmpm_kernels import (CellRows, boundary_corrections, boundary_edge_corrections, boundary_faces, boundary_terms,
                             cell_corrections, cell_records, cell_update, euler_update, face_width,
                             interior_pass, split_width)
 from .errors import InputError
@@ -475,50 +476,65 @@ class DGMPM(GodunovScheme):
         """out += weight (-int Phi F_N* over the boundary faces + int Phi S): the Delta
         t-dependent part of M dU/dt (the boundary faces' fluxes with their CTU corrections for
         ``dt``), weighted per node by weight = (step, inv_M): step inv_M[i]; ``terms``:
-        `fixed_terms`. Returns the power through the boundary (W)."""
+        `fixed_terms`. Returns the power through the boundary (W). ``weight`` None: the boundary
+        faces' terms -m_b F_b (nb, nc) written into ``out`` instead (`dgmpm_kernels.CellRows`), no
+        source."""
         if self.ctu is None:
             power = self._boundary_terms(terms, dt, weight, out)
         else:
             power = self.transverse_flux(terms, dt, weight, out)
-        if self.body_force is not None:          # int Phi rho0 b, the particles as quadrature
+        if weight is not None:
+            self.add_source(time, weight, out)
+        return power
+
+    def add_source(self, time, weight, out):
+        """out += weight int Phi rho0 b (the particles as quadrature), if the scene has a body force."""
+        if self.body_force is not None:
             p = self.particles
             source = self.source(p, time)
             source = p.volume[:, None] * source if self.cellwise else parallel.matmul(self.map.S_T, source,
                                                                                       scale=p.volume)
             out += (weight[0] * weight[1])[:, None] * source
-        return power
 
-    def euler_stage(self, grid_state, base, time, dt, step, out=None):
+    def euler_stage(self, grid_state, base, time, dt, step, out=None, rows=False):
         """base + step M^-1 R, M dU/dt = R = K^alpha F_alpha - int Phi F_N* + int Phi S at
         ``grid_state`` (boundary values at ``time``, CTU corrections for ``dt``): the volume term
         and the interior faces in one pass over the nodes (`euler_update`), then the boundary
-        faces and the source; also returns the boundary power (W)."""
+        faces and the source; also returns the boundary power (W). With ``cellwise``, the
+        particles' rows (`dgmpm_kernels.CellRows`): the boundary faces' terms first, then each
+        particle's row; with ``rows`` (no source), the rows are returned unformed, for the law's
+        pass to form each where it reads it (`step`)."""
         terms = self.fixed_terms(grid_state, time)
         flux, corr = terms[:2]
-        out = np.empty_like(base) if out is None else out
         if self.cellwise:                       # base, out: the particles'
-            weight = (step, self.inv_volume)
-            cell, m = self.particles.cell, self.interior.measure
-            cell_update(cell, self.cell_faces, m, flux, corr, dt, step, self.inv_volume, base, out)
-        else:
-            weight = (step, self.inv_M)              # step M^-1, node by node
-            euler_update(self.gather_interior, flux, corr, dt, grid_state.Q, self.stiffness, base, (step, self.inv_M),
-                         out)
-        power = self.add_boundary_terms(terms, time, dt, weight, out)
-        return out, power
+            boundary = self._buffer("boundary terms", (len(self.boundary), flux.shape[1]))
+            power = self.add_boundary_terms(terms, time, dt, None, boundary)
+            cells = CellRows(self.particles.cell, self.cell_faces, self.interior.measure, flux, corr, dt, step,
+                             self.inv_volume, base, boundary)
+            if rows:
+                return cells, power
+            out = np.empty_like(base) if out is None else out
+            cell_update(cells, out)
+            self.add_source(time, (step, self.inv_volume), out)
+            return out, power
+        out = np.empty_like(base) if out is None else out
+        weight = (step, self.inv_M)              # step M^-1, node by node
+        euler_update(self.gather_interior, flux, corr, dt, grid_state.Q, self.stiffness, base, weight, out)
+        return out, self.add_boundary_terms(terms, time, dt, weight, out)
 
     @stage
     def advance(self, grid_state, time, dt):
         """(f) forward Euler [R18 eq 20] or Heun's RK2 (`skdgmpm.integrators`), every stage on
         the grid: the first from the projected state, the second's law at the grid nodes."""
         # forward Euler's one stage into a work array of the step (read by the back map, then dead);
-        # with ``cellwise`` the particles' new U (a new array: the new state's)
+        # with ``cellwise``, its rows unformed (`rows_in_law_pass`), or the particles' new U
         out = (self._buffer("nodal stage", grid_state.U.shape) if self.integrator == "euler" and not self.cellwise
                else None)
+        rows = self.rows_in_law_pass
 
         def euler_stage(U, base, t, step):
             at = grid_state if U is grid_state.U else self.nodal_state(U)
-            return self.euler_stage(at, base, t, dt, step, out)
+            return self.euler_stage(at, base, t, dt, step, out, rows)
 
         return INTEGRATORS[self.integrator](euler_stage, grid_state.U, time, dt)
 
@@ -527,6 +543,13 @@ class DGMPM(GodunovScheme):
         """Q at the nodes from U at the nodes (the law evaluated at nodes, RK2 second stage): the
         law's pass of the particles (`MaterialSet.state`), the history in its virgin state."""
         return GridState(U, self.materials.state(U, self.cell_material[self.dof_cell], self.density))
+
+    @property
+    def rows_in_law_pass(self):
+        """Whether the step's new particle states are formed in the law's pass that reads them
+        (`dgmpm_kernels.CellRows`; one pass over the particles, not two): one particle per cell,
+        forward Euler, no body force."""
+        return self.cellwise and self.integrator == "euler" and self.body_force is None
 
     # ---------------------------------------------------------------- driver-facing
     @property
@@ -541,10 +564,13 @@ class DGMPM(GodunovScheme):
 
         def attempt(dt):
             U_nodes, work = self.advance(grid_state, state.t, dt)
-            if self.cellwise:                   # the particles' U already; the new state's records beside it
+            if self.cellwise:                   # the particles' U (or its rows); the new state's records beside it
                 rec, rec_state = self._records()
-                return self.constitutive_update(state, U_nodes, dt, records=(rec, self.point_cell, self.cell_normals,
-                                                                             rec_state)), work
+                records = (rec, self.point_cell, self.cell_normals, rec_state)
+                if isinstance(U_nodes, CellRows):
+                    return self.constitutive_update(state, np.empty(state.U.shape), dt, gather=U_nodes,
+                                                    records=records), work
+                return self.constitutive_update(state, U_nodes, dt, records=records), work
             # (g) U_p = sum_i S_ip U_i [R18 eq 40] (PIC), each particle's row computed in the
             # law's pass (h): one pass over the particles, not two
             U_p = np.empty(state.U.shape)

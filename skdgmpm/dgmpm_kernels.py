@@ -29,6 +29,8 @@ Face-set arrays as in `skdgmpm.faces` ((nf, d) normals, (nf,) measures); a trace
 by `DGMPM._setup_transverse` (empty arrays for DCU); the interior pass takes (h, normals (nf, 2, 2))
 of each side, face-major so that a chunk of faces is a contiguous slice.
 """
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
@@ -602,17 +604,20 @@ def boundary_terms(T, measure, N, flux, t_s, v_s, ctu, corr_bnd, dt, weight, R):
     power through the boundary, the sum over the faces in order of measure t . v (t = P N, v its
     velocity: (t*, v*) without CTU, read off F with it), summed here: numpy's sum of an array of
     the faces' powers after the pass took 48-65 µs of a 256² step (line_profiler; numpy's reduce
-    out of the caches after the passes), more than the pass. One pass on one thread: a few
-    thousand faces."""
-    return _boundary_terms(N.shape[1], ctu is not None)(T, measure, N, flux, t_s, v_s,
-                                                        _NO_FILTER if ctu is None else ctu, corr_bnd, dt, weight, R)
+    out of the caches after the passes), more than the pass. ``weight`` None: each face's term
+    -m_f F (nf, nc) written into R instead, row f (one particle per cell: `CellRows` adds them
+    where each particle's row is formed). One pass on one thread: a few thousand faces."""
+    return _boundary_terms(N.shape[1], ctu is not None, weight is not None)(
+        T, measure, N, flux, t_s, v_s, _NO_FILTER if ctu is None else ctu, corr_bnd, dt,
+        _NO_WEIGHT if weight is None else weight, R)
 
 
 _NO_FILTER = np.zeros((0, 0, 0))
+_NO_WEIGHT = (0.0, np.zeros(0))
 
 
 @kernel_factory
-def _boundary_terms(d, ctu):
+def _boundary_terms(d, ctu, integrate):
     def boundary_terms(T, measure, N, flux, t_s, v_s, filt, corr_bnd, dt, weight, R):
         dd, nc = d * d, d * d + d
         g, c = scratch((nc,)), scratch((nc,))
@@ -638,7 +643,11 @@ def _boundary_terms(d, ctu):
                 for i in range(d):
                     e += t_s[f, i] * v_s[f, i]
             power += measure[f] * e
-            _integrate(T, f, -1.0 * measure[f], g, weight, R)
+            if integrate:
+                _integrate(T, f, -1.0 * measure[f], g, weight, R)
+            else:                           # the product `_integrate` forms before its weights
+                for k in range(nc):
+                    R[f, k] = -1.0 * measure[f] * g[k]
         return power
     return boundary_terms
 
@@ -684,41 +693,89 @@ def _euler_update(nc, sides):           # literals: the loops unrolled, the corr
 
 
 # ---------------------------------------------------------------- one particle per cell
-def cell_update(cell, faces, measure, flux, corr, dt, step, inv_volume, base, out):
-    """out[p] = base[p] + step / V_p sum_k s_k m_f (F*_f + dt corr_f) over the interior faces f of
-    the cell of each particle p (one per cell, `DGMPM` with ``cellwise``): the forward Euler stage
-    and the back map of R18 §5 (f)-(g) as they reduce with one particle strictly inside each
-    cell (the projection is that particle's state, the volume term sums to zero over the cell's
-    nodes, a face's trace weights to one). s_k = -1 where the cell is side L of face f, +1 side
-    R. cell (n,) the particle's cell; faces (n_cells, faces per cell) int32: 2 f + side of each
-    local face, negative at boundary faces (their terms are added after, `add_boundary_terms`);
-    corr as `interface_flux` keeps it (nf, sides, nc). In parallel chunks of the particles."""
-    parallel.chunked(len(cell), _cell_update(flux.shape[1], corr.shape[1], faces.shape[1]), "rwwwwwwrrr",
-                     (cell, faces, measure, flux, corr, dt, step, inv_volume, base, out))
+class CellRows(NamedTuple):
+    """A forward Euler stage with one particle per cell (`DGMPM` with ``cellwise``), each particle's
+    row formed where it is read (`cell_row`): by `cell_update`, or by the law's pass of the step
+    that reads it (`skdgmpm.constitutive`: the state written and read in one pass, not two).
+    cell (n,) each particle's cell; faces (n_cells, faces per cell) int32: 2 f + side of each
+    local face, -1 - b at boundary face b (`DGMPM._cell_faces`); measure (nf,) of the interior
+    faces; flux (nf, nc) and corr (nf, sides, nc) as `DGMPM.interface_flux` keeps them; dt;
+    step; inv_volume (n,) 1 / V_p; base (n, nc); boundary (nb, nc) the boundary faces' terms
+    -m_b F_b (`boundary_terms` without weights)."""
+    cell: np.ndarray
+    faces: np.ndarray
+    measure: np.ndarray
+    flux: np.ndarray
+    corr: np.ndarray
+    dt: float
+    step: float
+    inv_volume: np.ndarray
+    base: np.ndarray
+    boundary: np.ndarray
+
+    @property
+    def sizes(self):
+        """The literal sizes of the compiled row: (nc, sides, faces per cell)."""
+        return self.flux.shape[1], self.corr.shape[1], self.faces.shape[1]
+
+    SPEC = "(rwwwwwwrrw)"               # `parallel.chunked`: the particles' arrays cut by rows
+
+
+@njit(cache=True, inline="always")
+def cell_row(rows, p, r, u, nc, sides, n_faces):
+    """u = base[p] + step / V_p (sum_k s_k m_f (F*_f + dt corr_f) over the interior faces f of
+    the cell of particle p, then + the boundary faces' terms -m_b F_b in the order of b): the
+    forward Euler stage and the back map of R18 §5 (f)-(g) as they reduce with one particle
+    strictly inside each cell (the projection is that particle's state, the volume term sums to
+    zero over the cell's nodes, a face's trace weights to one). s_k = -1 where the cell is side L
+    of face f, +1 side R. The boundary terms are added as `boundary_terms` added them face by
+    face into the nodal arrays (the same bits). ``rows``: `CellRows`; r: scratch (nc,)."""
+    cell, faces, measure, flux, corr, dt, step, inv_volume, base, boundary = rows
+    c = cell[p]
+    for k in range(nc):
+        r[k] = 0.0
+    for j in range(n_faces):
+        s = faces[c, j]
+        if s < 0:
+            continue
+        f = s >> 1
+        g = measure[f] if s & 1 else -measure[f]
+        for k in range(nc):
+            if sides == 2:
+                r[k] += g * (flux[f, k] + dt * (corr[f, 0, k] - corr[f, 1, k]))
+            elif sides == 1:
+                r[k] += g * (flux[f, k] + dt * corr[f, 0, k])
+            else:
+                r[k] += g * flux[f, k]
+    w = step * inv_volume[p]
+    for k in range(nc):
+        u[k] = base[p, k] + w * r[k]
+    last = -1
+    for _ in range(n_faces):            # the cell's boundary faces, lowest first
+        b = -1
+        for j in range(n_faces):
+            s = -1 - faces[c, j]
+            if s > last and (b < 0 or s < b):
+                b = s
+        if b < 0:
+            break
+        for k in range(nc):
+            u[k] += w * boundary[b, k]
+        last = b
+
+
+def cell_update(rows, out):
+    """out[p] = `cell_row` of each particle p of ``rows`` (`CellRows`), in parallel chunks of the
+    particles."""
+    parallel.chunked(len(rows.cell), _cell_update(*rows.sizes), CellRows.SPEC + "r", (tuple(rows), out))
 
 
 @kernel_factory
 def _cell_update(nc, sides, n_faces):
-    def cell_update(cell, faces, measure, flux, corr, dt, step, inv_volume, base, out):
-        r = scratch((nc,))
-        for p in range(len(cell)):
-            c = cell[p]
+    def cell_update(rows, out):
+        r, u = scratch((nc,)), scratch((nc,))
+        for p in range(len(out)):
+            cell_row(rows, p, r, u, nc, sides, n_faces)
             for k in range(nc):
-                r[k] = 0.0
-            for j in range(n_faces):
-                s = faces[c, j]
-                if s < 0:
-                    continue
-                f = s >> 1
-                g = measure[f] if s & 1 else -measure[f]
-                for k in range(nc):
-                    if sides == 2:
-                        r[k] += g * (flux[f, k] + dt * (corr[f, 0, k] - corr[f, 1, k]))
-                    elif sides == 1:
-                        r[k] += g * (flux[f, k] + dt * corr[f, 0, k])
-                    else:
-                        r[k] += g * flux[f, k]
-            w = step * inv_volume[p]
-            for k in range(nc):
-                out[p, k] = base[p, k] + w * r[k]
+                out[p, k] = u[k]
     return cell_update

@@ -116,3 +116,56 @@ def test_a_recorded_cell_that_is_not_hyperbolic_stops_the_pass_at_its_first_face
             faces = np.flatnonzero((st.interior.cell_L == c) | (st.interior.cell_R == c))
             assert str(exc).endswith(f"at face {faces[0]}")
             raise
+
+
+@pytest.mark.parametrize("scene, keys", [
+    ("plate_impact_neohookean_2d", ['method.transverse="ctu"']),
+    ("plate_impact_neohookean_2d", ['method.transverse="dcu"']),
+    ("plate_impact_j2_2d", []),                        # internal variables at the points
+    ("bar_elastoplastic_1d", []),
+])
+def test_the_law_pass_forms_each_particles_row_as_the_nodal_path_did(scene, keys, monkeypatch):
+    """With one particle per cell and forward Euler, the law's pass forms each particle's new state
+    where it reads it (`CellRows`: the interior faces' sum, then the boundary faces' terms; one pass
+    over the particles, not two). The reference: the rows formed first without the boundary faces
+    (`cell_update`), then the boundary faces' terms integrated face by face through the boundary
+    trace with the nodal weights (`boundary_terms`, as the nodal layout does), then the law's pass:
+    the same bits after 12 steps of an impact."""
+    def run(fused):
+        st = build(load_scene(scene, ["grid.cells=[12, 10]"] * scene.endswith("_2d") + keys))
+        stepper, state = st.stepper, st.initial
+        assert stepper.cellwise and stepper.rows_in_law_pass
+        if not fused:
+            _boundary_faces_after_the_rows(monkeypatch)
+        for _ in range(12):
+            state = stepper.step(state)
+        monkeypatch.undo()
+        return state
+
+    fused, reference = run(True), run(False)
+    for name in ("U", "Q", "x", "history"):
+        assert np.array_equal(getattr(fused, name), getattr(reference, name)), name
+    assert fused.t == reference.t and fused.step == reference.step == 12
+
+
+def _boundary_faces_after_the_rows(monkeypatch):
+    """Patch `DGMPM` so that the particles' rows are formed apart from the law's pass, with zero
+    boundary terms, and the boundary faces' terms then added into them by `boundary_terms` with
+    the weights (step, 1 / V) through the boundary trace (the faces in order, as a scatter)."""
+    from skdgmpm.dgmpm import DGMPM
+    original, kept = DGMPM.add_boundary_terms, {}
+
+    def add_boundary_terms(self, terms, time, dt, weight, out):
+        if weight is not None:
+            return original(self, terms, time, dt, weight, out)
+        power = original(self, terms, time, dt, None, out)      # the power as the step has it
+        out[:] = 0.0
+        kept.update(terms=terms, dt=dt)
+        return power
+
+    def add_source(self, time, weight, out):        # called just after the rows are formed (no body force here)
+        self._boundary_terms(kept["terms"], kept["dt"], weight, out)
+
+    monkeypatch.setattr(DGMPM, "rows_in_law_pass", property(lambda self: False))
+    monkeypatch.setattr(DGMPM, "add_boundary_terms", add_boundary_terms)
+    monkeypatch.setattr(DGMPM, "add_source", add_source)
