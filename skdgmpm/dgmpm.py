@@ -385,7 +385,8 @@ class DGMPM(GodunovScheme):
 
     def _boundary_terms(self, terms, dt, weight, out):
         """out += weight (-int Phi F over the boundary faces), F their fluxes with (CTU) the
-        filtered corrections for ``dt``; returns the power through them (W)."""
+        filtered corrections for ``dt``, or with ``weight`` None each face's term -m_b F into row b
+        of ``out`` (nb, nc); returns the power through them (W)."""
         b = self.boundary
         _, _, corr_bnd, flux, t_s, v_s = terms
         return boundary_terms(self.traces["boundary"], b.measure, b.normal, flux, t_s, v_s, self.ctu, corr_bnd, dt,
