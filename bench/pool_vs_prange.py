@@ -8,9 +8,9 @@ On the bench's plate (DGMPM CTU, 256^2), prints:
 - per chunked pass of a step on the pool (`parallel.rows`; the step's compiled chunk loops turned
   off), its time and how much longer it takes than its longest chunk, on each thread count (the
   pool's hand-over: wake-up, GIL, dispatch);
-- the cell update's kernel run per chunk through the pool and from its compiled chunk loop
-  (`dgmpm_kernels.update_chunks`) over the same chunk bounds, alternating, with a check that both
-  give the same bits.
+- the particles' rows (`dgmpm_kernels.cell_update`) run per chunk through the pool and from the
+  compiled chunk loop (`parallel.compiled_chunks`) over the same chunk bounds, alternating, with
+  a check that both give the same bits.
 
 OpenMP's workers wait passively here (``OMP_WAIT_POLICY``), unless it is set: spinning workers
 would hold the cores that the pool's workers need. Timings are measurements on the machine at
@@ -62,15 +62,15 @@ def compute_throughput(counts, n=150_000_000):
 
 
 def pass_costs(stepper, state, counts, steps=8):
-    """Per thread count: the step's time and, per chunked pass (named by its caller), its time and
-    its time beyond the longest chunk (medians, ms). Also returns the state and the arguments of
-    the last cell update (for `update_drivers`)."""
-    plain, log, captured = parallel.rows, collections.defaultdict(list), {}
+    """Per thread count: the step's time and, per chunked pass (named by the function that asks
+    for it), its time and its time beyond the longest chunk (medians, ms). Also returns the
+    state."""
+    plain, log = parallel.rows, collections.defaultdict(list)
 
-    def timed_rows(n, call):
+    def timed_rows(n, call, min_rows=None):
         caller = sys._getframe(1)
-        if caller.f_code.co_name == "euler_stage":
-            captured.update(caller.f_locals)
+        while caller.f_globals.get("__name__") == parallel.__name__:      # past `chunked`
+            caller = caller.f_back
         chunk = []
 
         def timed(lo, hi):
@@ -79,7 +79,7 @@ def pass_costs(stepper, state, counts, steps=8):
             chunk.append(time.perf_counter() - t0)
             return result
         t0 = time.perf_counter()
-        results = plain(n, timed)
+        results = plain(n, timed, min_rows)
         log[caller.f_code.co_name].append((time.perf_counter() - t0, max(chunk)))
         return results
 
@@ -101,33 +101,37 @@ def pass_costs(stepper, state, counts, steps=8):
         out[t] = {"step_ms": 1e3 * step,
                   "passes": {k: 1e3 * float(np.median([a for a, _ in v])) for k, v in log.items()},
                   "overhead_ms_per_pass": {k: 1e3 * float(np.median([a - b for a, b in v])) for k, v in log.items()}}
-    return out, state, captured
+    return out, state
 
 
-def update_drivers(frame, counts, rounds=80):
-    """The cell update through the pool and from a compiled prange over the same chunks, per
-    thread count (median ms, same bits); and on one thread."""
-    self, base, flux, corr, dt, step = (frame[k] for k in ("self", "base", "flux", "corr", "dt", "step"))
-    cell, measure, faces, inv_volume = self.particles.cell, self.interior.measure, self.cell_faces, self.inv_volume
-    kernel = dgmpm_kernels._cell_update(flux.shape[1], corr.shape[1], faces.shape[1])
-
-    n = len(base)
-    pooled, compiled = np.empty_like(base), np.empty_like(base)
+def update_drivers(stepper, state, counts, rounds=80):
+    """The particles' rows of a forward Euler step from ``state`` (`dgmpm_kernels.cell_update`)
+    through the pool and from numba's compiled chunk loop over the same chunks, per thread count
+    (median ms, same bits); and in one call on one thread."""
+    grid_state = stepper.project(state)
+    dt = stepper.time_step(state)
+    rows, _ = stepper.euler_stage(grid_state, state.U, state.t, dt, dt, rows=True)
+    kernel = dgmpm_kernels._cell_update(*rows.sizes)
+    pooled, compiled = np.empty_like(state.U), np.empty_like(state.U)
     times = []
     for _ in range(60):
         t0 = time.perf_counter()
-        kernel(cell, faces, measure, flux, corr, dt, step, inv_volume, base, pooled)
+        kernel(tuple(rows), pooled)
         times.append(time.perf_counter() - t0)
     out = {"one_thread_ms": 1e3 * float(np.median(times))}
+    loop = parallel.compiled_chunks
+
+    def through_pool():
+        parallel.compiled_chunks = lambda n, min_rows=None: None
+        try:
+            dgmpm_kernels.cell_update(rows, pooled)
+        finally:
+            parallel.compiled_chunks = loop
+
     for t in counts:
         parallel.set_threads(t)
         bench._use_threads(t)
-        numba.set_num_threads(min(t, numba.config.NUMBA_NUM_THREADS))
-        bounds = np.array([lo for lo, _ in parallel.chunks(n)] + [n], np.int64)
-        sides = [lambda: parallel.rows(n, lambda lo, hi: kernel(cell[lo:hi], faces, measure, flux, corr, dt, step,
-                                                                inv_volume[lo:hi], base[lo:hi], pooled[lo:hi])),
-                 lambda: dgmpm_kernels.update_chunks(bounds, cell, faces, measure, flux, corr, dt, step, inv_volume,
-                                                     base, compiled)]
+        sides = [through_pool, lambda: dgmpm_kernels.cell_update(rows, compiled)]
         _, wall = bench.alternate(sides, rounds, warmup=2)
         out[t] = {"pool_ms": 1e3 * float(np.median(wall[0])), "prange_ms": 1e3 * float(np.median(wall[1])),
                   "same_bits": bool(np.array_equal(pooled, compiled)), "layer": numba.threading_layer()}
@@ -149,11 +153,11 @@ def main():
     parallel.set_threads(1)
     for _ in range(3):
         state = disc.stepper.step(state)
-    result["pool"], state, frame = pass_costs(disc.stepper, state, [1] + counts)
+    result["pool"], state = pass_costs(disc.stepper, state, [1] + counts)
     for t, r in result["pool"].items():
         parts = ", ".join(f"{k} {v:.3f} (+{r['overhead_ms_per_pass'][k]:.3f})" for k, v in r["passes"].items())
         print(f"{t} thread(s): step {r['step_ms']:.2f} ms; passes, ms (beyond the longest chunk): {parts}")
-    result["cell_update"] = update_drivers(frame, counts)
+    result["cell_update"] = update_drivers(disc.stepper, state, counts)
     print(f"cell update, one thread: {result['cell_update']['one_thread_ms']:.3f} ms")
     for t in counts:
         r = result["cell_update"][t]

@@ -262,7 +262,7 @@ class MaterialSet:
         if not assess:
             return Q, h
         finite, J, lowest, speed, _ = health
-        return Q, h, Health(finite, J, lowest, speed, summarise(parallel.chunks(n), results)), x_new
+        return Q, h, Health(finite, J, lowest, speed, summarise(parallel.chunk_starts(n), results)), x_new
 
     def state(self, U, index, rho, history=None):
         """Q = [P(F), p / rho0] from states U = [F, p] (n, d*d + d) and densities rho (n,), with
@@ -297,7 +297,7 @@ class MaterialSet:
         h = h if self.n_history else history
         if not assess:
             return P, h
-        return P, h, Health(*health[:4], summarise(parallel.chunks(n), results))
+        return P, h, Health(*health[:4], summarise(parallel.chunk_starts(n), results))
 
     def tangent(self, F, index):
         """C = dP/dF restricted to the d-dimensional system: (n, d, d, d, d); for a law with

@@ -187,10 +187,14 @@ class DGMPM(GodunovScheme):
         """The cell records and their states (`cell_records`): work arrays of the step. With one
         particle per cell the step's constitutive update writes those of its new state (the law's
         tangent at hand, no pass of their own), and ``_records_of`` = (U, Q) of the state they
-        describe once the step is accepted; `interface_flux` computes them for any other state."""
-        face, rest, states = self._record_shapes
-        return ((self._buffer("records", face), self._buffer("records' split parts", rest)),
-                self._buffer("record states", states, np.int8))
+        describe once the step is accepted; `interface_flux` computes them for any other state.
+        Allocated on first need and kept (a step asks three times)."""
+        kept = self.__dict__.get("_record_arrays")
+        if kept is None:
+            face, rest, states = self._record_shapes
+            kept = self._record_arrays = ((self._buffer("records", face), self._buffer("records' split parts", rest)),
+                                          self._buffer("record states", states, np.int8))
+        return kept
 
     # ---------------------------------------------------------------- set-up
     def _setup_cell_faces(self):
@@ -355,7 +359,7 @@ class DGMPM(GodunovScheme):
         which `interface_flux` has just made or found for this state. Returns the fluxes and
         (t*, v*)."""
         b, d, g, ctu = self.boundary, self.d, self.ghosts, self.ctu is not None
-        nb, nc = len(b), system.n_components(d)
+        nb, nc = len(b), grid_state.U.shape[1]
         flux, t_s, v_s = np.empty((nb, nc)), np.empty((nb, d)), np.empty((nb, d))
         parts = self._buffer("boundary parts", (nb if ctu else 0, 2, nc))
         rec, state = self._records()

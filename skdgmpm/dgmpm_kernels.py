@@ -643,11 +643,12 @@ def _boundary_terms(d, ctu, integrate):
                 for i in range(d):
                     e += t_s[f, i] * v_s[f, i]
             power += measure[f] * e
+            m = -1.0 * measure[f]
             if integrate:
-                _integrate(T, f, -1.0 * measure[f], g, weight, R)
+                _integrate(T, f, m, g, weight, R)
             else:                           # the product `_integrate` forms before its weights
                 for k in range(nc):
-                    R[f, k] = -1.0 * measure[f] * g[k]
+                    R[f, k] = m * g[k]
         return power
     return boundary_terms
 

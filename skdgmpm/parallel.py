@@ -125,6 +125,21 @@ def chunks(n, min_rows=None):
     return bounds(n, 1 if t == 1 else min(t * PIECES, n // max(1, (min_rows or MIN_ROWS) // PIECES)))
 
 
+def chunk_starts(n, min_rows=None):
+    """The first rows of the chunks of range(n) (`chunks`), int64, made once per loop size and
+    setting (a step's health summary reads them: `health.summarise`)."""
+    return _chunk_starts(n, min_rows, threads(), MIN_ROWS, PIECES)
+
+
+@functools.lru_cache(maxsize=64)
+def _chunk_starts(n, min_rows, n_threads, *settings):
+    """`chunk_starts`, keyed by what `chunks` depends on: the loop size, `threads` and the
+    module's ``settings`` (MIN_ROWS, PIECES); read-only, as the cache shares it."""
+    starts = np.array([lo for lo, _ in chunks(n, min_rows)], np.int64)
+    starts.flags.writeable = False
+    return starts
+
+
 def rows(n, call, min_rows=None):
     """``call(lo, hi)`` over contiguous chunks of range(n) (`chunks`), in parallel, each thread
     taking the next chunk not yet taken until none is left; returns the results in chunk order

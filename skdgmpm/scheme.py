@@ -7,6 +7,7 @@ conditions is the same for first-order DGMPM (one point per face) and DGFEM (fac
 points).
 """
 import functools
+import operator
 import time as _time
 from dataclasses import dataclass
 
@@ -118,7 +119,7 @@ def predicted_growth(growths):
     one whose speed-up grows, within the largest surprise seen lately."""
     if not growths:
         return 1.0
-    rise = max((b - a for a, b in zip(growths, growths[1:])), default=0.0)
+    rise = max(map(operator.sub, growths[1:], growths), default=0.0)
     return min(2.0, max(1.0, growths[-1] + max(0.0, rise)))
 
 

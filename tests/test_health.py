@@ -178,12 +178,27 @@ def test_the_chunks_summaries_combine_as_one_pass_over_the_points():
     assert health.fastest == np.max(health.speed) and np.argmax(health.speed) < n // 2   # not in the last chunk
 
 
+
+def test_the_summary_names_the_first_bad_point_of_the_first_chunk_that_has_one():
+    """`health.summarise`: chunk-local first bad rows made global by the chunk's start, the first
+    chunk's that has one; an eigenvalue that is nan in any chunk is nan over all (numpy's min);
+    the minima left at infinity (no finite point) read nan."""
+    from skdgmpm.health import summarise
+
+    starts = np.array([0, 10, 20])
+    results = np.array([(-1, 1.0, 2.0, 5e3), (3, 0.5, np.nan, 4e3), (1, 0.2, 1.0, 7e3)])
+    first, J_min, omega_min, fastest = summarise(starts, results)
+    assert (first, J_min, fastest) == (13, 0.2, 7e3) and np.isnan(omega_min)
+    none_finite = np.array([(0, np.inf, np.inf, 0.0), (-1, np.inf, np.inf, 0.0)])
+    first, J_min, omega_min, fastest = summarise(starts[:2], none_finite)
+    assert first == 0 and np.isnan(J_min) and np.isnan(omega_min) and fastest == 0.0
+
 def test_the_fastest_wave_combines_as_numpys_max():
     """`health.summarise`'s fastest wave: the largest over the chunks, nan where a chunk's is
     (numpy's max of the speeds, which the time step read before the passes tallied it)."""
     from skdgmpm.health import summarise
 
-    chunks = [(0, 4), (4, 8)]
-    assert summarise(chunks, [(-1, 1.0, 2.0, 5e3), (-1, 0.9, 3.0, 6e3)]) == (-1, 0.9, 2.0, 6e3)
-    assert np.isnan(summarise(chunks, [(-1, 1.0, 2.0, np.nan), (-1, 0.9, 3.0, 6e3)])[3])
+    starts = np.array([0, 4])
+    assert summarise(starts, np.array([(-1, 1.0, 2.0, 5e3), (-1, 0.9, 3.0, 6e3)])) == (-1, 0.9, 2.0, 6e3)
+    assert np.isnan(summarise(starts, np.array([(-1, 1.0, 2.0, np.nan), (-1, 0.9, 3.0, 6e3)]))[3])
     assert np.isnan(np.max([np.nan, 6e3]))
