@@ -1,0 +1,81 @@
+"""Where a step's Python lies between its threaded passes (docs/bench/session32.md).
+
+    python bench/pass_gaps.py [--method dgmpm-ctu] [--size 256] [--threads 2] [--steps 100]
+
+The bench's plate is stepped on ``--threads`` threads; every threaded pass (`parallel.chunked`,
+the pool's `parallel.rows`; a pass inside another counted once) is timestamped as it starts and
+ends. Prints the median wall time of each gap (from the step's start to its first pass, between
+two passes, from its last pass to its end), named by the passes around it, and each pass's own
+time. `serial_share.py` gives the sum; this says where it is. Timings are measurements on the
+machine at hand, not test results.
+"""
+import argparse
+import collections
+import statistics
+import time
+
+from skdgmpm import bench, parallel
+from skdgmpm.build import build
+
+
+def timestamped(marks):
+    """Wrap `parallel.chunked` and `parallel.rows` to append ("in", kernel name, t) and ("out",
+    t) to ``marks`` around each outermost pass."""
+    depth = [0]
+
+    def wrap(call):
+        def timed(n, kernel, *args, **kwargs):
+            depth[0] += 1
+            if depth[0] == 1:
+                marks.append(("in", getattr(kernel, "__name__", call.__name__), time.perf_counter()))
+            try:
+                return call(n, kernel, *args, **kwargs)
+            finally:
+                depth[0] -= 1
+                if depth[0] == 0:
+                    marks.append(("out", "", time.perf_counter()))
+        return timed
+    parallel.chunked, parallel.rows = wrap(parallel.chunked), wrap(parallel.rows)
+
+
+def main():
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--method", default="dgmpm-ctu")
+    parser.add_argument("--size", type=int, default=256)
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--steps", type=int, default=100)
+    args = parser.parse_args()
+    marks = []
+    timestamped(marks)
+    disc = build(bench.scene_for(args.method, args.size))
+    step = bench.Stepping(disc)
+    bench._use_threads(args.threads)
+    for _ in range(5):
+        step()
+    gaps, passes, walls = collections.defaultdict(list), collections.defaultdict(list), []
+    for _ in range(args.steps):
+        marks.clear()
+        t0 = time.perf_counter()
+        step()
+        t1 = time.perf_counter()
+        last, label = t0, "start"
+        for kind, name, t in marks:
+            if kind == "in":
+                gaps[f"{label} -> {name}"].append(t - last)
+                label, began = name, t
+            else:
+                passes[label].append(t - began)
+                last = t
+        gaps[f"{label} -> end"].append(t1 - last)
+        walls.append(t1 - t0)
+    print(f"{args.method} {args.size}^2, {args.threads} thread(s), medians of {args.steps} steps")
+    for name, values in gaps.items():
+        print(f"  gap  {name:48s} {1e6 * statistics.median(values):8.1f} us")
+    for name, values in passes.items():
+        print(f"  pass {name:48s} {1e6 * statistics.median(values):8.1f} us")
+    total = sum(statistics.median(v) for v in gaps.values())
+    print(f"  step {1e6 * statistics.median(walls):.0f} us; the gaps' medians add up to {1e6 * total:.0f} us")
+
+
+if __name__ == "__main__":
+    main()
