@@ -18,9 +18,10 @@ from skdgmpm import bench, parallel
 from skdgmpm.build import build
 
 
-def timestamped(marks):
+def timestamped(marks, patch=setattr):
     """Wrap `parallel.chunked` and `parallel.rows` to append ("in", kernel name, t) and ("out",
-    t) to ``marks`` around each outermost pass."""
+    "", t) to ``marks`` around each outermost pass. ``patch(module, name, value)`` replaces each
+    (a test passes pytest's monkeypatch.setattr, which undoes it)."""
     depth = [0]
 
     def wrap(call):
@@ -35,7 +36,47 @@ def timestamped(marks):
                 if depth[0] == 0:
                     marks.append(("out", "", time.perf_counter()))
         return timed
-    parallel.chunked, parallel.rows = wrap(parallel.chunked), wrap(parallel.rows)
+    patch(parallel, "chunked", wrap(parallel.chunked))
+    patch(parallel, "rows", wrap(parallel.rows))
+
+
+def split(marks, t0, t1):
+    """One step's wall time t0 -> t1 cut at its passes' ``marks``: (gaps, passes), lists of
+    (name, seconds) in step order; a gap is named by the passes around it ("start -> a",
+    "a -> b", "b -> end"). Together they add up to the step."""
+    gaps, passes = [], []
+    last, label = t0, "start"
+    for kind, name, t in marks:
+        if kind == "in":
+            gaps.append((f"{label} -> {name}", t - last))
+            label, began = name, t
+        else:
+            passes.append((label, t - began))
+            last = t
+    gaps.append((f"{label} -> end", t1 - last))
+    return gaps, passes
+
+
+def measure(method, n, steps, threads, marks):
+    """(gaps, passes, walls) over ``steps`` steps of the bench's plate after 5 warm-up steps:
+    {name: [seconds per step]} for the gaps and the passes, and the steps' wall times. The
+    passes must be `timestamped` into ``marks``."""
+    disc = build(bench.scene_for(method, n))
+    step = bench.Stepping(disc)
+    bench._use_threads(threads)
+    for _ in range(5):
+        step()
+    gaps, passes, walls = collections.defaultdict(list), collections.defaultdict(list), []
+    for _ in range(steps):
+        marks.clear()
+        t0 = time.perf_counter()
+        step()
+        t1 = time.perf_counter()
+        for into, parts in zip((gaps, passes), split(marks, t0, t1)):
+            for name, seconds in parts:
+                into[name].append(seconds)
+        walls.append(t1 - t0)
+    return gaps, passes, walls
 
 
 def main():
@@ -47,27 +88,7 @@ def main():
     args = parser.parse_args()
     marks = []
     timestamped(marks)
-    disc = build(bench.scene_for(args.method, args.size))
-    step = bench.Stepping(disc)
-    bench._use_threads(args.threads)
-    for _ in range(5):
-        step()
-    gaps, passes, walls = collections.defaultdict(list), collections.defaultdict(list), []
-    for _ in range(args.steps):
-        marks.clear()
-        t0 = time.perf_counter()
-        step()
-        t1 = time.perf_counter()
-        last, label = t0, "start"
-        for kind, name, t in marks:
-            if kind == "in":
-                gaps[f"{label} -> {name}"].append(t - last)
-                label, began = name, t
-            else:
-                passes[label].append(t - began)
-                last = t
-        gaps[f"{label} -> end"].append(t1 - last)
-        walls.append(t1 - t0)
+    gaps, passes, walls = measure(args.method, args.size, args.steps, args.threads, marks)
     print(f"{args.method} {args.size}^2, {args.threads} thread(s), medians of {args.steps} steps")
     for name, values in gaps.items():
         print(f"  gap  {name:48s} {1e6 * statistics.median(values):8.1f} us")

@@ -265,3 +265,33 @@ def test_serial_share_times_every_threaded_pass_once(monkeypatch):
     if parallel._compiled_layer():      # law's pass, faces, boundary faces, update: each step (and repeats)
         assert calls.count("chunked") >= 4 * (3 + 3), calls         # the 3 warm-up steps too
     assert 0 < inside < wall and 0 < outside < wall         # medians over the steps, each its own
+
+
+def test_pass_gaps_cut_each_step_at_its_passes(monkeypatch):
+    """bench/pass_gaps.py: a DCU step at 32^2 (MIN_ROWS 16: its passes on two threads) cut at its
+    threaded passes, each named by its kernel, the gaps named by the passes around them, from
+    the step's start to its end; gaps and passes add up to the step's wall time."""
+    import importlib.util
+    from pathlib import Path
+    from skdgmpm import parallel
+
+    path = Path(__file__).parent.parent / "bench" / "pass_gaps.py"
+    spec = importlib.util.spec_from_file_location("pass_gaps", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    monkeypatch.setattr(parallel, "MIN_ROWS", 16)
+    marks, steps = [], 3
+    script.timestamped(marks, monkeypatch.setattr)
+    try:
+        gaps, passes, walls = script.measure("dgmpm-dcu", 32, steps, 2, marks)
+    finally:
+        parallel.set_threads(None)
+    assert {"interior_pass", "boundary_faces", "states"} <= set(passes), passes
+    names = list(gaps)
+    assert names[0].startswith("start -> ") and names[-1].endswith(" -> end")
+    for before, after in zip(names, names[1:]):             # a chain: each gap starts where the last ended
+        assert before.split(" -> ")[1] == after.split(" -> ")[0]
+    assert all(len(v) == steps for v in (*gaps.values(), *passes.values()))
+    for k in range(steps):
+        parts = sum(v[k] for v in gaps.values()) + sum(v[k] for v in passes.values())
+        assert abs(parts - walls[k]) <= 1e-9 * max(1.0, walls[k]) and min(v[k] for v in gaps.values()) >= 0
