@@ -187,14 +187,10 @@ class DGMPM(GodunovScheme):
         """The cell records and their states (`cell_records`): work arrays of the step. With one
         particle per cell the step's constitutive update writes those of its new state (the law's
         tangent at hand, no pass of their own), and ``_records_of`` = (U, Q) of the state they
-        describe once the step is accepted; `interface_flux` computes them for any other state.
-        Allocated on first need and kept (a step asks three times)."""
-        kept = self.__dict__.get("_record_arrays")
-        if kept is None:
-            face, rest, states = self._record_shapes
-            kept = self._record_arrays = ((self._buffer("records", face), self._buffer("records' split parts", rest)),
-                                          self._buffer("record states", states, np.int8))
-        return kept
+        describe once the step is accepted; `interface_flux` computes them for any other state."""
+        face, rest, states = self._record_shapes
+        return ((self._buffer("records", face), self._buffer("records' split parts", rest)),
+                self._buffer("record states", states, np.int8))
 
     # ---------------------------------------------------------------- set-up
     def _setup_cell_faces(self):
