@@ -126,18 +126,19 @@ def chunks(n, min_rows=None):
 
 
 def chunk_starts(n, min_rows=None):
-    """The first rows of the chunks of range(n) (`chunks`), int64, made once per loop size and
-    setting (a step's health summary reads them: `health.summarise`)."""
-    return _chunk_starts(n, min_rows, threads(), MIN_ROWS, PIECES)
+    """The first rows of the chunks of range(n) (`chunks`), int64, read-only (a step's health
+    summary reads them: `health.summarise`): the cached bounds of `compiled_chunks` but the last."""
+    return _chunk_bounds(n, min_rows, threads(), MIN_ROWS, PIECES)[:-1]
 
 
 @functools.lru_cache(maxsize=64)
-def _chunk_starts(n, min_rows, n_threads, *settings):
-    """`chunk_starts`, keyed by what `chunks` depends on: the loop size, `threads` and the
-    module's ``settings`` (MIN_ROWS, PIECES); read-only, as the cache shares it."""
-    starts = np.array([lo for lo, _ in chunks(n, min_rows)], np.int64)
-    starts.flags.writeable = False
-    return starts
+def _chunk_bounds(n, min_rows, n_threads, *settings):
+    """The bounds [lo_0, lo_1, ..., n] (int64) of the chunks of range(n) (`chunks`), made once
+    for each set of what they depend on: the loop size, `threads` and the module's ``settings``
+    (MIN_ROWS, PIECES), passed as the cache's key; read-only, as the cache shares them."""
+    bounds = np.array([lo for lo, _ in chunks(n, min_rows)] + [n], np.int64)
+    bounds.flags.writeable = False
+    return bounds
 
 
 def rows(n, call, min_rows=None):
@@ -205,8 +206,8 @@ def _run(call, parts, n_threads):
 
 
 def compiled_chunks(n, min_rows=None):
-    """The bounds [lo_0, lo_1, ..., n] (int64) of the chunks of range(n) (`chunks`), for
-    a compiled chunk loop (a ``prange`` over them calling the kernel on each: `_chunk_loop`),
+    """The bounds [lo_0, lo_1, ..., n] (int64, read-only: `_chunk_bounds`) of the chunks of
+    range(n) (`chunks`), for a compiled chunk loop (a ``prange`` over them calling the kernel on each: `_chunk_loop`),
     numba's thread count set to their number; None where the loop is better run
     by `rows`: one chunk, or a threading layer of numba's other than OpenMP and TBB (its
     ``workqueue`` hands chunks over slower than this module's pool, docs/bench/session20.md).
@@ -221,14 +222,14 @@ def compiled_chunks(n, min_rows=None):
 
 @functools.lru_cache(maxsize=64)
 def _compiled_bounds(n, min_rows, n_threads, *settings):
-    """(bounds, numba's thread count) of `compiled_chunks`, made once for each set of what they
-    depend on: the loop size, `threads` and the module's ``settings`` (MIN_ROWS, PIECES), passed
-    as the cache's key. A step asks five times; making them and setting numba's count anew took
-    1-2 % of a DGMPM step on two threads, on one thread. (None, 1) where `rows` runs the loop."""
-    parts = chunks(n, min_rows)
-    if len(parts) == 1 or not _compiled_layer():
+    """(bounds, numba's thread count) of `compiled_chunks`, made once for each key of
+    `_chunk_bounds` (whose bounds they are): a step asks five times; making them and setting
+    numba's count anew took 1-2 % of a DGMPM step on two threads, on one thread. (None, 1) where
+    `rows` runs the loop."""
+    bounds = _chunk_bounds(n, min_rows, n_threads, *settings)
+    if len(bounds) == 2 or not _compiled_layer():
         return None, 1
-    return np.array([lo for lo, _ in parts] + [n], np.int64), min(team(n, min_rows), numba.config.NUMBA_NUM_THREADS)
+    return bounds, min(team(n, min_rows), numba.config.NUMBA_NUM_THREADS)
 
 
 _numba_count = threading.local()
