@@ -221,15 +221,11 @@ class DGMPM(GodunovScheme):
         set up when first needed (`_split_topology`). DCU: empty."""
         empty = (np.zeros(0), np.zeros((2, 0, 2)), np.zeros((2, 0), np.int64), np.zeros((2, 0), np.int64),
                  np.zeros((2, 0)))
-        self.ctu, self._split, self._parts_in_pass = None, None, False
+        self.ctu, self._split = None, None
         self.topology = {"boundary": empty}
         if self.transverse != "ctu" or self.d != 2:
             return
         self.topology["boundary"] = self.side_topology("boundary")
-        _, _, edge_int, _, sign = self.topology["boundary"]
-        inner = edge_int >= 0           # the rows (edge, side) the boundary faces send into: one sender each?
-        rows = 2 * edge_int[inner] + (sign[inner] <= 0)
-        self._parts_in_pass = len(np.unique(rows)) == len(rows)
         self.cell_sources = self._cell_sources()
         frame = np.zeros((len(self.boundary), 2, 2))
         free_v = np.zeros((len(self.boundary), 2), bool)
@@ -237,7 +233,7 @@ class DGMPM(GodunovScheme):
         for sel, bc in self.bc_groups:
             frame[sel], imp_v, imp_t = bc.constraints(self.boundary.normal[sel])
             free_v[sel], free_t[sel] = ~imp_v, ~imp_t
-        self.ctu = self._boundary_filter(frame, free_v, free_t)
+        self.ctu = distinct_rows(self._boundary_filter(frame, free_v, free_t))
 
     def _split_topology(self):
         """What the faces' CTU split reads when a cell is not recorded (more than one particle in
@@ -363,19 +359,15 @@ class DGMPM(GodunovScheme):
         flux, t_s, v_s = np.empty((nb, nc)), np.empty((nb, d)), np.empty((nb, d))
         parts = self._buffer("boundary parts", (nb if ctu else 0, 2, nc))
         rec, state = self._records()
-        # the parts entering interior edges: added in the face pass where each edge's side has one
-        # boundary face sending into it (not in a strip one cell wide) and the cells send theirs
-        in_pass = corr if self._parts_in_pass and corr.shape[1] == 2 else _NO_CORRECTIONS
         args = (self.traces["boundary"], grid_state.U, grid_state.Q, self.density, b.normal, b.cell_L,
                 self.cell_material, *self.laws, (g.frame, g.velocity, g.values_at(time), g.copy), ctu,
                 self.topology["boundary"], (rec, state, self.cell_normals, self.boundary_local_face), flux, t_s,
-                v_s, parts, in_pass)
+                v_s, parts)
         bad = boundary_faces(*args)
         if bad >= 0:
             _not_hyperbolic(bad)
         if ctu:
-            boundary_corrections(self.topology["boundary"], parts, corr if in_pass is _NO_CORRECTIONS else
-                                 _NO_CORRECTIONS, corr_bnd)
+            boundary_corrections(self.topology["boundary"], parts, corr, corr_bnd)
         return flux, t_s, v_s
 
     @stage
@@ -454,9 +446,9 @@ class DGMPM(GodunovScheme):
         return out
 
     def _boundary_filter(self, frame, free_v, free_t):
-        """The matrices (nc, nc) of `transverse_flux` (linear in the corrections): the components
-        left free by each boundary face's condition, in its frame (nb, 2, 2); as (the distinct
-        matrices (k, nc, nc), each face's (nb,)): a few conditions and directions make them."""
+        """The matrix (nb, nc, nc) of `transverse_flux` (linear in the corrections): the components
+        left free by each boundary face's condition, in its frame (nb, 2, 2). (The step keeps its
+        distinct matrices and each face's, `distinct_rows`: a few conditions and directions.)"""
         nb, nc = len(self.boundary), system.n_components(self.d)
         filt = np.empty((nb, nc, nc))
         for c in range(nc):             # the filter of each unit correction: a column
@@ -466,8 +458,7 @@ class DGMPM(GodunovScheme):
             filt[:, :, c] = system.join(
                 np.einsum("fkj,fk->fj", frame, dv)[:, :, None] * self.boundary.normal[:, None, :],
                 np.einsum("fkj,fk->fj", frame, dt_))
-        bits, which = np.unique(filt.reshape(nb, -1).view(np.int64), axis=0, return_inverse=True)
-        return np.ascontiguousarray(bits.view(float).reshape(-1, nc, nc)), which.reshape(-1).astype(np.int64)
+        return filt
 
     def fixed_terms(self, grid_state, time):
         """The faces' terms of a grid state at ``time``: `interface_flux` and `boundary_flux`
@@ -597,7 +588,13 @@ class DGMPM(GodunovScheme):
 
 
 _NO_TRACE = (np.zeros(1, np.int32), np.zeros(0, np.int32), np.zeros(0))    # an empty CSR triple: not read
-_NO_CORRECTIONS = np.zeros((0, 2, 6))      # no interior faces' corrections: none added (`boundary_faces`)
+
+
+def distinct_rows(a):
+    """(the distinct rows of ``a`` (k, ...) in bits, the row of each (n,) int64): a[i] ==
+    distinct[which[i]] bit for bit (-0.0 and 0.0 kept apart, as a product can tell them)."""
+    bits, which = np.unique(a.reshape(len(a), -1).view(np.int64), axis=0, return_inverse=True)
+    return np.ascontiguousarray(bits.view(a.dtype).reshape(-1, *a.shape[1:])), which.reshape(-1).astype(np.int64)
 
 
 def _local_face(mesh, cells, facets):

@@ -485,7 +485,7 @@ def boundary_edge_corrections(to_boundary, G, corr_bnd):
 
 # ---------------------------------------------------------------- boundary faces
 def boundary_faces(T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, records, flux, t_s, v_s,
-                   parts, corr):
+                   parts):
     """Every boundary face's interior side (traction
     t_L, velocity v_L, impedance Z = sqrt(rho0 A_N), tangent C, density), its stationary state
     (t*, v*) into t_s, v_s (nf, d) (`bcs.star_face` under the face's condition, ``ghosts`` =
@@ -493,11 +493,7 @@ def boundary_faces(T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, c
     (nf,)), `bcs.BoundaryGhosts`), its flux F_N(t*, v*) into flux (nf, nc) and, with ``ctu``,
     the transverse corrections per unit Delta t of the fluctuation F_N(t*, v*) - F_N(t_L, v_L)
     entering the cell along its two edges adjacent to the face into parts (nf, 2, nc)
-    (`boundary_corrections` adds them where they go), and those entering interior edges added at
-    once to the rows of corr (n_interior, 2, nc) that the cell sends (`face_corrections`), where
-    every such row has one boundary face sending into it (`DGMPM.boundary_flux` checks; a row
-    written by one chunk only: the same bits as `boundary_corrections` adds; corr empty, (0, 2, nc):
-    none added here). ``records`` = (rec, state, normals, local
+    (`boundary_corrections` adds them where they go). ``records`` = (rec, state, normals, local
     face of each face in its cell) (`cell_records`, the state's): a face whose cell is recorded
     reads its side there (as an interior face does), another gathers its trace and evaluates
     the law's tangent (a face then costs about ten interior faces). Each face writes its own rows:
@@ -506,9 +502,9 @@ def boundary_faces(T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, c
     or -1."""
     rec, state, normals, local = records
     kernel = _boundary_faces(N.shape[1], normals.shape[1], only_law(laws))
-    return parallel.chunked(len(N), kernel, "lh" + "w" * 18,
+    return parallel.chunked(len(N), kernel, "lh" + "w" * 17,
                             (T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, (rec, state, local),
-                             flux, t_s, v_s, parts, corr), "first", max(1, parallel.MIN_ROWS // 8))
+                             flux, t_s, v_s, parts), "first", max(1, parallel.MIN_ROWS // 8))
 
 
 @kernel_factory
@@ -516,7 +512,7 @@ def _boundary_faces(d, slots, only):
     width = record_width(d, slots)
 
     def boundary_faces(lo, hi, T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, records, flux,
-                       t_s, v_s, parts, corr):
+                       t_s, v_s, parts):
         dd, nc = d * d, d * d + d
         q, F, Zi, w = scratch((nc,)), scratch((3, 3)), scratch((d, d)), scratch((nc,))
         t_L, v_L, Z, C = scratch((d,)), scratch((d,)), scratch((d, d)), scratch((d, d, d, d))
@@ -575,14 +571,6 @@ def _boundary_faces(d, slots, only):
                         return f - lo
                 for k in range(6):
                     parts[f, 0, k], parts[f, 1, k] = G_0[k], G_1[k]
-                if len(corr) > 0:           # the parts entering interior edges, into the rows the cell sends
-                    edge_int, sign = topo[2], topo[4]
-                    for e in range(2):
-                        j = edge_int[e, f]
-                        if j >= 0:
-                            row = 0 if sign[e, f] > 0 else 1
-                            for k in range(6):
-                                corr[j, row, k] += parts[f, e, k]
         return -1
     return boundary_faces
 
@@ -592,14 +580,14 @@ def boundary_corrections(topo, parts, corr, corr_bnd):
     """The boundary faces' CTU parts (nf, 2, nc) (`boundary_faces`) added where they go, face by
     face: an interior edge's to the interior faces' corrections ``corr`` (nf, sides, nc) as
     `interface_flux` keeps them (sides 2: into the row of the side whose cell sends it, sides 1:
-    with the edge's sign; `face_corrections`; corr empty where `boundary_faces` has added them),
-    a boundary edge's to corr_bnd. Serial: boundary faces next to one edge write the same rows."""
+    with the edge's sign; `face_corrections`), a boundary edge's to corr_bnd. Serial: boundary
+    faces next to one edge write the same rows."""
     _, _, edge_int, edge_bnd, sign = topo
     sides = corr.shape[1]
     for f in range(len(parts)):
         for e in range(2):
             j = edge_int[e, f]
-            if j >= 0 and len(corr) > 0:
+            if j >= 0:
                 s = sign[e, f]
                 for k in range(6):
                     if sides == 2:              # the part the cell sends: its side's row
@@ -613,8 +601,8 @@ def boundary_terms(T, measure, N, flux, t_s, v_s, ctu, corr_bnd, dt, weight, R):
     """R += w (-int Phi F over the boundary faces), F their flux (nf, nc) plus, where CTU's filters
     are given as ``ctu`` = (the distinct filters (k, nc, nc), each face's (nf,)), its filtered
     corrections filter (dt corr_bnd) (`DGMPM.transverse_flux`; a few distinct filters are read
-    from the caches where one per face came from memory), weighted per node by w = (step, inv_M) as in `_integrate`; returns the
-    power through the boundary, the sum over the faces in order of measure t . v (t = P N, v its
+    from the caches where one per face came from memory), weighted per node by w = (step, inv_M)
+    as in `_integrate`; returns the power through the boundary, the sum over the faces in order of measure t . v (t = P N, v its
     velocity: (t*, v*) without CTU, read off F with it), summed here: numpy's sum of an array of
     the faces' powers after the pass took 48-65 µs of a 256² step (line_profiler; numpy's reduce
     out of the caches after the passes), more than the pass. ``weight`` None: each face's term

@@ -6,6 +6,7 @@ import pytest
 
 from skdgmpm import system
 from skdgmpm.build import build
+from skdgmpm.dgmpm import distinct_rows
 from skdgmpm.dgmpm_kernels import face_corrections
 from skdgmpm.riemann import godunov_fluxes, transverse_fluxes
 from skdgmpm.scene import load_scene
@@ -169,3 +170,32 @@ def _boundary_faces_after_the_rows(monkeypatch):
     monkeypatch.setattr(DGMPM, "rows_in_law_pass", property(lambda self: False))
     monkeypatch.setattr(DGMPM, "add_boundary_terms", add_boundary_terms)
     monkeypatch.setattr(DGMPM, "add_source", add_source)
+
+
+def test_distinct_rows_give_every_row_back_bit_for_bit():
+    """`distinct_rows`: each row once, and every row read back through its index with its bits,
+    -0.0 kept apart from 0.0 and nan kept (a product by one can tell them)."""
+    rows = np.array([[1.0, 0.0], [1.0, -0.0], [np.nan, 2.0], [1.0, 0.0], [np.nan, 2.0], [0.5, 3.0]])
+    a = rows.reshape(6, 1, 2)
+    distinct, which = distinct_rows(a)
+    assert distinct.shape == (4, 1, 2) and which.dtype == np.int64
+    assert np.array_equal(distinct[which].view(np.int64), a.view(np.int64))
+
+
+def test_ctu_boundary_filters_are_kept_once_per_condition_and_direction():
+    """CTU's boundary filter (`DGMPM.transverse_flux`) is kept as its distinct matrices and each
+    face's: no more than the boundary's (condition, normal) pairs; each face's is a projection
+    onto the components its condition leaves free (rank: the free velocity and traction
+    components, `BoundaryCondition.constraints`)."""
+    s = build(load_scene("plate_impact_neohookean_2d", ['method.transverse="ctu"'])).stepper
+    filters, which = s.ctu
+    group = np.empty(len(s.boundary), int)
+    for k, (sel, _) in enumerate(s.bc_groups):
+        group[sel] = k
+    pairs = {(g, *n) for g, n in zip(group, np.round(s.boundary.normal, 12))}
+    assert len(which) == len(s.boundary) and 2 <= len(filters) <= len(pairs) < len(which)
+    for sel, bc in s.bc_groups:
+        _, imposed_v, imposed_t = bc.constraints(s.boundary.normal[sel])
+        P = filters[which[sel]]
+        assert np.allclose(P @ P, P, atol=1e-12)
+        assert np.all(np.linalg.matrix_rank(P) == np.sum(~imposed_v) + np.sum(~imposed_t))

@@ -69,35 +69,6 @@ def test_bits_do_not_depend_on_the_thread_count(name, monkeypatch):
             assert np.array_equal(one.history, other.history)
 
 
-def test_boundary_parts_added_in_the_face_pass_give_the_serial_bits(monkeypatch):
-    """CTU: the boundary faces' parts entering interior edges are added in their threaded face
-    pass where each edge side has one boundary face sending into it (`DGMPM.boundary_flux`), in
-    `boundary_corrections`' serial loop otherwise (a strip one cell wide, whose two boundary faces
-    of a cell send into the same edges): both give the same bits (2 threads, several chunks of
-    boundary faces)."""
-    monkeypatch.setattr(parallel, "MIN_ROWS", 16)
-    scene, overrides = CASES["dgmpm-ctu"]
-    runs = []
-    try:
-        parallel.set_threads(2)
-        for in_pass in (True, False):
-            disc = build(load_scene(scene, overrides))
-            assert disc.stepper._parts_in_pass
-            disc.stepper._parts_in_pass = in_pass
-            state = disc.initial
-            for _ in range(STEPS):
-                state = disc.stepper.step(state)
-            runs.append((state, disc.stepper.external_work))
-    finally:
-        parallel.set_threads(None)
-    (one, work), (other, other_work) = runs
-    assert np.any(one.U != disc.initial.U) and work == other_work
-    assert np.array_equal(one.U, other.U) and np.array_equal(one.Q, other.Q)
-    for rows in (1, 2):             # a strip one cell wide shares its edges' rows; two cells wide, not
-        strip = build(load_scene("plane_wave_svk_2d", [f"grid.cells=[20, {rows}]", 'method.transverse="ctu"']))
-        assert strip.stepper._parts_in_pass == (rows == 2)
-
-
 @pytest.mark.parametrize("name", ["dgmpm-ctu", "dgmpm-dcu-rk2", "rk-dgfem-1", "ader-dgfem-2", "ader-dgmpm-1",
                                   "mpm-usl-hat", "mpm-usf-cpgimp"])
 def test_every_pass_of_a_step_runs_in_compiled_chunk_loops(name, monkeypatch):
