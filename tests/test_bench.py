@@ -295,3 +295,38 @@ def test_pass_gaps_cut_each_step_at_its_passes(monkeypatch):
     for k in range(steps):
         parts = sum(v[k] for v in gaps.values()) + sum(v[k] for v in passes.values())
         assert abs(parts - walls[k]) <= 1e-9 * max(1.0, walls[k]) and min(v[k] for v in gaps.values()) >= 0
+
+
+def test_pass_scaling_pairs_every_pass_and_sizes_its_arrays(monkeypatch):
+    """bench/pass_scaling.py: the arrays of a `chunked` call are paired with the letters of its
+    spec, nested tuples alike, each buffer once; a DCU plate at 32^2 (MIN_ROWS 16: its passes on
+    two threads) stepped on 1 and 2 threads in turn gives every pass and the step a time per
+    round on each count, and the bytes of the timed rounds' passes only (the arrays' sizes)."""
+    import collections
+    import importlib.util
+    from pathlib import Path
+    from skdgmpm import parallel
+
+    path = Path(__file__).parent.parent / "bench" / "pass_scaling.py"
+    spec = importlib.util.spec_from_file_location("pass_scaling", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    a, b, c = np.zeros(10), np.zeros((4, 3)), np.zeros(7, np.int32)
+    found = script.arrays(parallel._parsed("lr(wr)h(c)"), (a, (b, a), ((c, c, b),)))
+    assert [(letter, x.nbytes) for letter, x in found] == [("r", 80), ("w", 96), ("c", 28)]   # a, b, c once each
+    monkeypatch.setattr(parallel, "MIN_ROWS", 16)
+    marks, sizes, rounds = [], collections.defaultdict(list), 4
+    script.pass_gaps.timestamped(marks, monkeypatch.setattr)
+    script.counted(sizes, monkeypatch.setattr)
+    try:
+        times, cells = script.measure("dgmpm-dcu", 32, 2, rounds, marks, sizes, warmup=1)
+    finally:
+        parallel.set_threads(None)
+    assert cells == 32 * 32
+    assert {"interior_pass", "states", "step"} <= set(times[1]) and set(times[1]) == set(times[2])
+    assert all(len(v) == rounds for t in (1, 2) for v in times[t].values())
+    for t in (1, 2):                        # a step holds its passes
+        assert all(times[t]["step"][k] > times[t]["states"][k] + times[t]["interior_pass"][k] for k in range(rounds))
+    assert len(sizes["states"]) == 2 * rounds                   # one law's pass a step, the warm-up's dropped
+    streamed, whole = sizes["states"][0]
+    assert streamed >= 2 * cells * 6 * 8 and whole > 0          # at least U and Q (n, 6), cut by rows

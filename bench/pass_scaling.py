@@ -1,0 +1,141 @@
+"""Which threaded pass of a step scales, and the bytes it streams (docs/bench/session34.md).
+
+    python bench/pass_scaling.py [--method dgmpm-ctu] [--size 256] [--threads 2] [--rounds 40]
+
+One simulation of the bench's plate is stepped on one thread and on ``--threads`` in turn, one
+step each a round (ABBA, as `skdgmpm bench` pairs its thread counts), every threaded pass
+timestamped (`pass_gaps.timestamped`). Prints, per pass, its median time on each count and the
+median of its per-round speed-ups (quartiles), and the bytes per cell of the arrays it streams:
+those `parallel.chunked` cuts by rows (``r``, ``i``, ``c``, ``k``), each buffer once, and beside
+them those it takes whole (``w``: gathered by index, or not read at all). Streamed bytes over
+the pass's time give its rate, to read against the triad's on the same counts (the last line,
+`bench.memory_bandwidth`): a pass near the triad's rate gains at most what the triad gains. The
+bytes are the arrays' sizes, not counted traffic (no write-allocate, no cache reuse). Timings
+are measurements on the machine at hand, not test results.
+"""
+import argparse
+import collections
+import importlib.util
+import time
+from pathlib import Path
+
+import numpy as np
+
+from skdgmpm import bench, parallel
+from skdgmpm.build import build
+
+_spec = importlib.util.spec_from_file_location("pass_gaps", Path(__file__).with_name("pass_gaps.py"))
+pass_gaps = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(pass_gaps)
+
+STREAMED = ("r", "i", "c", "k")         # `parallel.chunked` letters that cut an argument by rows
+
+
+def arrays(parsed, args):
+    """The arrays of a `chunked` call as (letter, array), each buffer once (by its first byte and
+    size), the letters of ``parsed`` (`parallel._parsed`) paired with ``args`` (tuples nested
+    alike; a CSR triple's three arrays under its ``c``)."""
+    seen, out = set(), []
+
+    def visit(letter, arg):
+        if isinstance(letter, tuple):
+            for item_letter, item in zip(letter, arg):
+                visit(item_letter, item)
+        elif isinstance(arg, (tuple, list)):
+            for item in arg:
+                visit(letter, item)
+        elif isinstance(arg, np.ndarray):
+            key = (arg.__array_interface__["data"][0], arg.nbytes)
+            if key not in seen:
+                seen.add(key)
+                out.append((letter, arg))
+
+    visit(tuple(letter for letter in parsed if letter not in ("l", "h")), args)
+    return out
+
+
+def counted(sizes, patch=setattr):
+    """Wrap `parallel.chunked` to add each outermost call's (streamed, whole) bytes to
+    ``sizes[kernel name]`` (a list of pairs, one per call). ``patch(module, name, value)``
+    replaces it (a test passes pytest's monkeypatch.setattr, which undoes it)."""
+    chunked, depth = parallel.chunked, [0]
+
+    def sized(n, kernel, spec, args, *rest, **kwargs):
+        depth[0] += 1
+        try:
+            if depth[0] == 1:
+                found = arrays(parallel._parsed(spec), args)
+                streamed = sum(a.nbytes for letter, a in found if letter in STREAMED)
+                sizes[getattr(kernel, "__name__", "chunked")].append(
+                    (streamed, sum(a.nbytes for _, a in found) - streamed))
+            return chunked(n, kernel, spec, args, *rest, **kwargs)
+        finally:
+            depth[0] -= 1
+    patch(parallel, "chunked", sized)
+
+
+def measure(method, n, threads, rounds, marks, sizes=None, warmup=3):
+    """Per-pass times {count: {pass: [seconds per step]}} and the step's, one simulation stepped
+    on 1 and ``threads`` threads in turn (ABBA), ``rounds`` timed rounds after ``warmup``, and the
+    cells. The passes must be `pass_gaps.timestamped` into ``marks``; a pass that runs several
+    times in a step is summed. ``sizes`` (`counted` into it): emptied as the timed rounds start,
+    so that it holds their passes' bytes only."""
+    disc = build(bench.scene_for(method, n))
+    step = bench.Stepping(disc)
+    times = {1: collections.defaultdict(list), threads: collections.defaultdict(list)}
+    previous = parallel.threads()
+    try:
+        for k in range(warmup + rounds):
+            if k == warmup and sizes is not None:
+                sizes.clear()
+            for t in ((1, threads) if k % 2 == 0 else (threads, 1)):
+                bench._use_threads(t)
+                marks.clear()
+                t0 = time.perf_counter()
+                step()
+                t1 = time.perf_counter()
+                if k < warmup:
+                    continue
+                _, passes = pass_gaps.split(marks, t0, t1)
+                total = collections.Counter()
+                for name, seconds in passes:
+                    total[name] += seconds
+                for name, seconds in total.items():
+                    times[t][name].append(seconds)
+                times[t]["step"].append(t1 - t0)
+    finally:
+        parallel.set_threads(previous)
+    return times, int(disc.stepper.grid.submesh.nelements)
+
+
+def main():
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--method", default="dgmpm-ctu")
+    parser.add_argument("--size", type=int, default=256)
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--rounds", type=int, default=40)
+    args = parser.parse_args()
+    marks, sizes = [], collections.defaultdict(list)
+    pass_gaps.timestamped(marks)
+    counted(sizes)
+    times, cells = measure(args.method, args.size, args.threads, args.rounds, marks, sizes)
+    t = args.threads
+    print(f"{args.method} {args.size}^2, 1 and {t} threads in turn, {args.rounds} rounds (ABBA); "
+          f"per pass: median us per step, speed-up (quartiles), bytes per cell streamed + whole, GB/s streamed")
+    for name in times[1]:
+        one, many = np.array(times[1][name]), np.array(times[t][name])
+        q25, median, q75 = np.percentile(one / many, [25, 50, 75])
+        line = (f"  {name:20s} {1e6 * np.median(one):8.0f} / {1e6 * np.median(many):8.0f} us  "
+                f"x{median:.2f} ({q25:.2f}-{q75:.2f})")
+        if name in sizes:
+            calls = len(sizes[name]) / (2 * args.rounds)                # calls per step
+            streamed, whole = (calls * np.mean([s[i] for s in sizes[name]]) for i in (0, 1))
+            line += (f"  {streamed / cells:6.0f} + {whole / cells:5.0f} B/cell  "
+                     f"{streamed / np.median(one) / 1e9:5.1f} / {streamed / np.median(many) / 1e9:5.1f} GB/s")
+        print(line)
+    speeds = bench.memory_bandwidth([1, t])
+    print(f"  triad (bench.memory_bandwidth): {speeds[1]:.1f} / {speeds[t]:.1f} GB/s (x{speeds[t] / speeds[1]:.2f})")
+
+
+if __name__ == "__main__":
+    main()
