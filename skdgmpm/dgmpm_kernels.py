@@ -602,12 +602,13 @@ def boundary_terms(T, measure, N, flux, t_s, v_s, ctu, corr_bnd, dt, weight, R):
     are given as ``ctu`` = (the distinct filters (k, nc, nc), each face's (nf,)), its filtered
     corrections filter (dt corr_bnd) (`DGMPM.transverse_flux`; a few distinct filters are read
     from the caches where one per face came from memory), weighted per node by w = (step, inv_M)
-    as in `_integrate`; returns the power through the boundary, the sum over the faces in order of measure t . v (t = P N, v its
-    velocity: (t*, v*) without CTU, read off F with it), summed here: numpy's sum of an array of
-    the faces' powers after the pass took 48-65 µs of a 256² step (line_profiler; numpy's reduce
-    out of the caches after the passes), more than the pass. ``weight`` None: each face's term
-    -m_f F (nf, nc) written into R instead, row f (one particle per cell: `CellRows` adds them
-    where each particle's row is formed). One pass on one thread: a few thousand faces."""
+    as in `_integrate`. Returns the power through the boundary, the sum over the faces in order
+    of measure t . v (t = P N, v its velocity: (t*, v*) without CTU, read off F with it), summed
+    here: numpy's sum of an array of the faces' powers after the pass took 48-65 µs of a 256²
+    step (line_profiler; numpy's reduce out of the caches after the passes), more than the pass.
+    ``weight`` None: each face's term -m_f F (nf, nc) written into R instead, row f (one particle
+    per cell: `CellRows` adds them where each particle's row is formed). One pass on one thread:
+    a few thousand faces."""
     return _boundary_terms(N.shape[1], ctu is not None, weight is not None)(
         T, measure, N, flux, t_s, v_s, _NO_FILTER if ctu is None else ctu, corr_bnd, dt,
         _NO_WEIGHT if weight is None else weight, R)

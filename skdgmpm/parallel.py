@@ -207,10 +207,10 @@ def _run(call, parts, n_threads):
 
 def compiled_chunks(n, min_rows=None):
     """The bounds [lo_0, lo_1, ..., n] (int64, read-only: `_chunk_bounds`) of the chunks of
-    range(n) (`chunks`), for a compiled chunk loop (a ``prange`` over them calling the kernel on each: `_chunk_loop`),
-    numba's thread count set to their number; None where the loop is better run
-    by `rows`: one chunk, or a threading layer of numba's other than OpenMP and TBB (its
-    ``workqueue`` hands chunks over slower than this module's pool, docs/bench/session20.md).
+    range(n) (`chunks`), for a compiled chunk loop (a ``prange`` over them calling the kernel on
+    each: `_chunk_loop`), numba's thread count set to their number; None where the loop is
+    better run by `rows`: one chunk, or a threading layer of numba's other than OpenMP and TBB
+    (its ``workqueue`` hands chunks over slower than this module's pool, docs/bench/session20.md).
     The same chunks, each computed by the same kernel: the same bits as `rows`. numba's
     threads hand over in microseconds and without the GIL, where the pool's workers each wake
     and take the GIL (0.06-0.2 ms a pass on two threads, 0.8-1.1 ms on sixteen)."""
