@@ -83,7 +83,7 @@ def measure(method, n, threads, rounds, marks, sizes=None, warmup=3):
     disc = build(bench.scene_for(method, n))
     step = bench.Stepping(disc)
     times = {1: collections.defaultdict(list), threads: collections.defaultdict(list)}
-    previous = parallel.threads()
+    previous = parallel.set_threads(1)      # the setting itself (None: $SKDGMPM_THREADS or every core), put back
     try:
         for k in range(warmup + rounds):
             if k == warmup and sizes is not None:

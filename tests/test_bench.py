@@ -320,6 +320,7 @@ def test_pass_scaling_pairs_every_pass_and_sizes_its_arrays(monkeypatch):
     script.counted(sizes, monkeypatch.setattr)
     try:
         times, cells = script.measure("dgmpm-dcu", 32, 2, rounds, marks, sizes, warmup=1)
+        assert parallel._threads is None                # the setting put back as it was, not fixed
     finally:
         parallel.set_threads(None)
     assert cells == 32 * 32
