@@ -83,6 +83,8 @@ class DGMPM(GodunovScheme):
                      "transverse_flux", "source", "nodal_state", "constitutive_update", "check")
     external_work: float = field(default=0.0, init=False)
     _kept: tuple = field(default=None, init=False, repr=False)   # (projected state, its faces' terms)
+    _work: dict = field(default_factory=dict, init=False, repr=False)    # `_buffer`'s arrays, by name
+    _record_arrays: tuple = field(default=None, init=False, repr=False)  # `_records`'
 
     def __post_init__(self):
         if self.integrator not in ("euler", "rk2"):
@@ -176,11 +178,10 @@ class DGMPM(GodunovScheme):
         reused: an array over glibc's 32 MB mmap threshold allocated every step is mapped afresh
         and its pages faulted in and zeroed each time, which two threads do slower than one
         (512^2: the Euler stage 25 ms on one thread, 69 ms on two)."""
-        work = self.__dict__.setdefault("_work", {})
         shape = (shape,) if isinstance(shape, int) else tuple(shape)
-        a = work.get(name)
-        if a is None or a.shape != shape or a.dtype != np.dtype(dtype):
-            a = work[name] = np.empty(shape, dtype=dtype)
+        a = self._work.get(name)
+        if a is None or a.shape != shape or a.dtype != dtype:
+            a = self._work[name] = np.empty(shape, dtype=dtype)
         return a
 
     def _records(self):
@@ -188,9 +189,11 @@ class DGMPM(GodunovScheme):
         particle per cell the step's constitutive update writes those of its new state (the law's
         tangent at hand, no pass of their own), and ``_records_of`` = (U, Q) of the state they
         describe once the step is accepted; `interface_flux` computes them for any other state."""
-        face, rest, states = self._record_shapes
-        return ((self._buffer("records", face), self._buffer("records' split parts", rest)),
-                self._buffer("record states", states, np.int8))
+        if self._record_arrays is None:         # their shapes are the grid's: made once
+            face, rest, states = self._record_shapes
+            self._record_arrays = ((self._buffer("records", face), self._buffer("records' split parts", rest)),
+                                   self._buffer("record states", states, np.int8))
+        return self._record_arrays
 
     # ---------------------------------------------------------------- set-up
     def _setup_cell_faces(self):

@@ -8,7 +8,7 @@ points).
 """
 import functools
 import operator
-import time as _time
+from time import perf_counter
 from dataclasses import dataclass
 
 import numpy as np
@@ -93,17 +93,20 @@ def stage(method):
 def _timed(method, name):
     @functools.wraps(method)
     def timed(self, *args, **kwargs):
-        clock = self.__dict__.setdefault("_stage_clock", {"seconds": {}, "calls": {}, "inner": [0.0]})
-        clock["inner"].append(0.0)
-        t0 = _time.perf_counter()
+        clock = self.__dict__.get("_stage_clock")
+        if clock is None:               # made once, not at every call (a step makes nine)
+            clock = self.__dict__["_stage_clock"] = {"seconds": {}, "calls": {}, "inner": [0.0]}
+        inner, seconds, calls = clock["inner"], clock["seconds"], clock["calls"]
+        inner.append(0.0)
+        t0 = perf_counter()
         try:
             return method(self, *args, **kwargs)
         finally:
-            spent = _time.perf_counter() - t0
-            inner = clock["inner"].pop()
-            clock["inner"][-1] += spent
-            clock["seconds"][name] = clock["seconds"].get(name, 0.0) + spent - inner
-            clock["calls"][name] = clock["calls"].get(name, 0) + 1
+            spent = perf_counter() - t0
+            within = inner.pop()
+            inner[-1] += spent
+            seconds[name] = seconds.get(name, 0.0) + spent - within
+            calls[name] = calls.get(name, 0) + 1
 
     timed.stage = name
     return timed
