@@ -10,7 +10,9 @@ those `parallel.chunked` cuts by rows (``r``, ``i``, ``c``, ``k``), each buffer 
 them those it takes whole (``w``: gathered by index, or not read at all). Streamed bytes over
 the pass's time give its rate, to read against the triad's on the same counts (the last line,
 `bench.memory_bandwidth`): a pass near the triad's rate gains at most what the triad gains. The
-bytes are the arrays' sizes, not counted traffic (no write-allocate, no cache reuse). Timings
+bytes are the arrays' sizes, not counted traffic (no write-allocate, no cache reuse). Then the
+passes' speed-up taken together, and the step's time outside them (`between`): the speed-up the
+step would have with nothing between its passes, and what the serial rest costs it. Timings
 are measurements on the machine at hand, not test results.
 """
 import argparse
@@ -108,6 +110,18 @@ def measure(method, n, threads, rounds, marks, sizes=None, warmup=3):
     return times, int(disc.stepper.grid.submesh.nelements)
 
 
+def between(times, threads):
+    """Per round, on 1 and ``threads`` threads, the passes' summed time and the step's time
+    outside them (the serial Python between passes, and the compiled code that is not a
+    threaded pass): {count: (passes, rest)}, arrays (rounds,), from `measure`'s times. The
+    passes' own speed-up is what the step would gain with nothing between them."""
+    out = {}
+    for count in (1, threads):
+        passes = sum(np.array(v) for name, v in times[count].items() if name != "step")
+        out[count] = (passes, np.array(times[count]["step"]) - passes)
+    return out
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("--method", default="dgmpm-ctu")
@@ -133,6 +147,9 @@ def main():
             line += (f"  {streamed / cells:6.0f} + {whole / cells:5.0f} B/cell  "
                      f"{streamed / np.median(one) / 1e9:5.1f} / {streamed / np.median(many) / 1e9:5.1f} GB/s")
         print(line)
+    (p1, r1), (pt, rt) = between(times, t).values()
+    print(f"  passes alone         x{np.median(p1 / pt):.2f}; outside them {1e6 * np.median(r1):.0f} / "
+          f"{1e6 * np.median(rt):.0f} us a step ({100 * np.median(rt / (pt + rt)):.1f} % of the {t}-thread step)")
     speeds = bench.memory_bandwidth([1, t])
     print(f"  triad (bench.memory_bandwidth): {speeds[1]:.1f} / {speeds[t]:.1f} GB/s (x{speeds[t] / speeds[1]:.2f})")
 

@@ -331,3 +331,12 @@ def test_pass_scaling_pairs_every_pass_and_sizes_its_arrays(monkeypatch):
     assert len(sizes["states"]) == 2 * rounds                   # one law's pass a step, the warm-up's dropped
     streamed, whole = sizes["states"][0]
     assert streamed >= 2 * cells * 6 * 8 and whole > 0          # at least U and Q (n, 6), cut by rows
+    split = script.between(times, 2)
+    for t in (1, 2):                        # passes + rest = the step, round by round; the rest >= 0
+        passes, rest = split[t]
+        assert np.allclose(passes + rest, times[t]["step"], rtol=1e-12, atol=0) and rest.min() >= 0
+        assert np.all(passes >= np.array(times[t]["states"]) + times[t]["interior_pass"])
+    fake = {1: {"a": [3.0, 5.0], "b": [1.0, 1.0], "step": [4.5, 6.5]},
+            2: {"a": [2.0, 3.0], "b": [0.5, 0.5], "step": [3.0, 4.0]}}
+    (p1, r1), (p2, r2) = script.between(fake, 2).values()       # worked by hand
+    assert p1.tolist() == [4.0, 6.0] and p2.tolist() == [2.5, 3.5] and r1.tolist() == r2.tolist() == [0.5, 0.5]
