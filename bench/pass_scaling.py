@@ -147,7 +147,8 @@ def main():
             line += (f"  {streamed / cells:6.0f} + {whole / cells:5.0f} B/cell  "
                      f"{streamed / np.median(one) / 1e9:5.1f} / {streamed / np.median(many) / 1e9:5.1f} GB/s")
         print(line)
-    (p1, r1), (pt, rt) = between(times, t).values()
+    split = between(times, t)
+    (p1, r1), (pt, rt) = split[1], split[t]
     print(f"  passes alone         x{np.median(p1 / pt):.2f}; outside them {1e6 * np.median(r1):.0f} / "
           f"{1e6 * np.median(rt):.0f} us a step ({100 * np.median(rt / (pt + rt)):.1f} % of the {t}-thread step)")
     speeds = bench.memory_bandwidth([1, t])

@@ -84,7 +84,6 @@ class DGMPM(GodunovScheme):
     external_work: float = field(default=0.0, init=False)
     _kept: tuple = field(default=None, init=False, repr=False)   # (projected state, its faces' terms)
     _work: dict = field(default_factory=dict, init=False, repr=False)    # `_buffer`'s arrays, by name
-    _record_arrays: tuple = field(default=None, init=False, repr=False)  # `_records`'
 
     def __post_init__(self):
         if self.integrator not in ("euler", "rk2"):
@@ -124,10 +123,10 @@ class DGMPM(GodunovScheme):
         self._setup_boundary(g.element)
         self._setup_cell_faces()
         self._setup_transverse()
-        # the records' shapes (`_records`): face_width and split_width are compiled, asked once
+        # the cell records (`_records`): work arrays of every step, their shapes the grid's, made once
         slots, ctu = self.cell_normals.shape[1], self.ctu is not None
-        self._record_shapes = ((n_cells, face_width(self.d, slots)), (n_cells, split_width(self.d, slots, ctu)),
-                               (n_cells,))
+        self._record_arrays = ((np.empty((n_cells, face_width(self.d, slots))),
+                                np.empty((n_cells, split_width(self.d, slots, ctu)))), np.empty(n_cells, np.int8))
         self.laws = law_table(self.materials.materials)          # the compiled point laws
         f = self.interior
         if self.cellwise:       # a boundary face's side: its cell's particle (weight 1: the same bits)
@@ -174,10 +173,10 @@ class DGMPM(GodunovScheme):
 
     def _buffer(self, name, shape, dtype=float):
         """A work array of the step that no result refers to once the step is done (the nodal
-        state, forward Euler's stage, the cell records, the CTU fluctuations), allocated once and
-        reused: an array over glibc's 32 MB mmap threshold allocated every step is mapped afresh
-        and its pages faulted in and zeroed each time, which two threads do slower than one
-        (512^2: the Euler stage 25 ms on one thread, 69 ms on two)."""
+        state, forward Euler's stage, the CTU fluctuations), allocated once and reused: an array
+        over glibc's 32 MB mmap threshold allocated every step is mapped afresh and its pages
+        faulted in and zeroed each time, which two threads do slower than one (512^2: the Euler
+        stage 25 ms on one thread, 69 ms on two)."""
         shape = (shape,) if isinstance(shape, int) else tuple(shape)
         a = self._work.get(name)
         if a is None or a.shape != shape or a.dtype != dtype:
@@ -189,10 +188,6 @@ class DGMPM(GodunovScheme):
         particle per cell the step's constitutive update writes those of its new state (the law's
         tangent at hand, no pass of their own), and ``_records_of`` = (U, Q) of the state they
         describe once the step is accepted; `interface_flux` computes them for any other state."""
-        if self._record_arrays is None:         # their shapes are the grid's: made once
-            face, rest, states = self._record_shapes
-            self._record_arrays = ((self._buffer("records", face), self._buffer("records' split parts", rest)),
-                                   self._buffer("record states", states, np.int8))
         return self._record_arrays
 
     # ---------------------------------------------------------------- set-up

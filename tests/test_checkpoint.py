@@ -147,12 +147,12 @@ def test_signals_from_outside_checkpoint_and_exit_75(tmp_path, signum):
 def test_a_step_changes_no_stepper_state_but_the_checkpointed_one():
     """What a step leaves changed on a stepper is in checkpoint.RUN_STATE or a cache rebuilt at the
     start of every step: nothing else needs to be in a checkpoint."""
-    # _work: DGMPM's work arrays (cell records, CTU fluctuations), every entry written in a step
+    # _work: DGMPM's work arrays (nodal state, CTU fluctuations), every entry written in a step
     # before it is read; _last_shape: MPM's shape-function arrays, rebuilt in every step; _split:
     # DGMPM's CTU split topology, built from the grid when a step first has an unrecorded cell;
     # _records_of: the arrays of the state whose cell records the last step wrote (read only by a
     # step from that very state: a resumed run's state is a new one, whose records are computed);
-    # _record_arrays: those of _work that hold the cell records, kept together
+    # _record_arrays: DGMPM's cell records, work arrays made at set-up and written in every step
     caches = {"_kept", "history_n", "_repeated", "_work", "_last_shape", "_split", "_records_of", "_record_arrays"}
     for name, (scene, overrides) in {**CASES, "rk-dgfem": ("bar_elastic_1d", [
             "grid.cells=10", 'method.name="rk-dgfem"', 'method.integrator="rk2"', "method.order=1", "method.cfl=0.3",
