@@ -10,7 +10,9 @@ those `parallel.chunked` cuts by rows (``r``, ``i``, ``c``, ``k``), each buffer 
 them those it takes whole (``w``: gathered by index, or not read at all). Streamed bytes over
 the pass's time give its rate, to read against the triad's on the same counts (the last line,
 `bench.memory_bandwidth`): a pass near the triad's rate gains at most what the triad gains. The
-bytes are the arrays' sizes, not counted traffic (no write-allocate, no cache reuse). Then the
+bytes are the arrays' sizes, not counted traffic (no write-allocate, no cache reuse), taken in
+one more step on each count after the timed ones (taken in the timed steps, the walk over the
+arguments doubled the step's time outside its passes, docs/bench/session36.md). Then the
 passes' speed-up taken together, and the step's time outside them (`between`): the speed-up the
 step would have with nothing between its passes, and what the serial rest costs it. Timings
 are measurements on the machine at hand, not test results.
@@ -58,14 +60,17 @@ def arrays(parsed, args):
 
 def counted(sizes, patch=setattr):
     """Wrap `parallel.chunked` to add each outermost call's (streamed, whole) bytes to
-    ``sizes[kernel name]`` (a list of pairs, one per call). ``patch(module, name, value)``
-    replaces it (a test passes pytest's monkeypatch.setattr, which undoes it)."""
-    chunked, depth = parallel.chunked, [0]
+    ``sizes[kernel name]`` (a list of pairs, one per call) while the switch it returns is on
+    (``switch[0] = True``; off as made): the walk over a call's arguments costs a step's Python
+    as much again as the step's own between its passes, so the timed steps run with it off
+    (`measure`). ``patch(module, name, value)`` replaces it (a test passes pytest's
+    monkeypatch.setattr, which undoes it)."""
+    chunked, depth, switch = parallel.chunked, [0], [False]
 
     def sized(n, kernel, spec, args, *rest, **kwargs):
         depth[0] += 1
         try:
-            if depth[0] == 1:
+            if depth[0] == 1 and switch[0]:
                 found = arrays(parallel._parsed(spec), args)
                 streamed = sum(a.nbytes for letter, a in found if letter in STREAMED)
                 sizes[getattr(kernel, "__name__", "chunked")].append(
@@ -74,22 +79,22 @@ def counted(sizes, patch=setattr):
         finally:
             depth[0] -= 1
     patch(parallel, "chunked", sized)
+    return switch
 
 
-def measure(method, n, threads, rounds, marks, sizes=None, warmup=3):
+def measure(method, n, threads, rounds, marks, counting=None, warmup=3):
     """Per-pass times {count: {pass: [seconds per step]}} and the step's, one simulation stepped
     on 1 and ``threads`` threads in turn (ABBA), ``rounds`` timed rounds after ``warmup``, and the
     cells. The passes must be `pass_gaps.timestamped` into ``marks``; a pass that runs several
-    times in a step is summed. ``sizes`` (`counted` into it): emptied as the timed rounds start,
-    so that it holds their passes' bytes only."""
+    times in a step is summed. ``counting``: the switch of `counted`, turned on for one more step
+    on each count after the timed rounds (so its sizes hold one step's passes per count, and no
+    timed step pays for the count)."""
     disc = build(bench.scene_for(method, n))
     step = bench.Stepping(disc)
     times = {1: collections.defaultdict(list), threads: collections.defaultdict(list)}
     previous = parallel.set_threads(1)      # the setting itself (None: $SKDGMPM_THREADS or every core), put back
     try:
         for k in range(warmup + rounds):
-            if k == warmup and sizes is not None:
-                sizes.clear()
             for t in ((1, threads) if k % 2 == 0 else (threads, 1)):
                 bench._use_threads(t)
                 marks.clear()
@@ -105,6 +110,14 @@ def measure(method, n, threads, rounds, marks, sizes=None, warmup=3):
                 for name, seconds in total.items():
                     times[t][name].append(seconds)
                 times[t]["step"].append(t1 - t0)
+        if counting is not None:
+            counting[0] = True
+            try:
+                for t in (1, threads):
+                    bench._use_threads(t)
+                    step()
+            finally:
+                counting[0] = False
     finally:
         parallel.set_threads(previous)
     return times, int(disc.stepper.grid.submesh.nelements)
@@ -131,8 +144,8 @@ def main():
     args = parser.parse_args()
     marks, sizes = [], collections.defaultdict(list)
     pass_gaps.timestamped(marks)
-    counted(sizes)
-    times, cells = measure(args.method, args.size, args.threads, args.rounds, marks, sizes)
+    switch = counted(sizes)
+    times, cells = measure(args.method, args.size, args.threads, args.rounds, marks, switch)
     t = args.threads
     print(f"{args.method} {args.size}^2, 1 and {t} threads in turn, {args.rounds} rounds (ABBA); "
           f"per pass: median us per step, speed-up (quartiles), bytes per cell streamed + whole, GB/s streamed")
@@ -142,7 +155,7 @@ def main():
         line = (f"  {name:20s} {1e6 * np.median(one):8.0f} / {1e6 * np.median(many):8.0f} us  "
                 f"x{median:.2f} ({q25:.2f}-{q75:.2f})")
         if name in sizes:
-            calls = len(sizes[name]) / (2 * args.rounds)                # calls per step
+            calls = len(sizes[name]) / 2                # calls per step: one counted step on each count
             streamed, whole = (calls * np.mean([s[i] for s in sizes[name]]) for i in (0, 1))
             line += (f"  {streamed / cells:6.0f} + {whole / cells:5.0f} B/cell  "
                      f"{streamed / np.median(one) / 1e9:5.1f} / {streamed / np.median(many) / 1e9:5.1f} GB/s")

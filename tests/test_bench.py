@@ -301,7 +301,8 @@ def test_pass_scaling_pairs_every_pass_and_sizes_its_arrays(monkeypatch):
     """bench/pass_scaling.py: the arrays of a `chunked` call are paired with the letters of its
     spec, nested tuples alike, each buffer once; a DCU plate at 32^2 (MIN_ROWS 16: its passes on
     two threads) stepped on 1 and 2 threads in turn gives every pass and the step a time per
-    round on each count, and the bytes of the timed rounds' passes only (the arrays' sizes)."""
+    round on each count, and the bytes of the passes (the arrays' sizes) of one untimed step on
+    each count after them: the timed steps count nothing."""
     import collections
     import importlib.util
     from pathlib import Path
@@ -317,9 +318,10 @@ def test_pass_scaling_pairs_every_pass_and_sizes_its_arrays(monkeypatch):
     monkeypatch.setattr(parallel, "MIN_ROWS", 16)
     marks, sizes, rounds = [], collections.defaultdict(list), 4
     script.pass_gaps.timestamped(marks, monkeypatch.setattr)
-    script.counted(sizes, monkeypatch.setattr)
+    switch = script.counted(sizes, monkeypatch.setattr)
+    assert switch == [False]                # made off: a step counts nothing
     try:
-        times, cells = script.measure("dgmpm-dcu", 32, 2, rounds, marks, sizes, warmup=1)
+        times, cells = script.measure("dgmpm-dcu", 32, 2, rounds, marks, switch, warmup=1)
         assert parallel._threads is None                # the setting put back as it was, not fixed
     finally:
         parallel.set_threads(None)
@@ -328,7 +330,7 @@ def test_pass_scaling_pairs_every_pass_and_sizes_its_arrays(monkeypatch):
     assert all(len(v) == rounds for t in (1, 2) for v in times[t].values())
     for t in (1, 2):                        # a step holds its passes
         assert all(times[t]["step"][k] > times[t]["states"][k] + times[t]["interior_pass"][k] for k in range(rounds))
-    assert len(sizes["states"]) == 2 * rounds                   # one law's pass a step, the warm-up's dropped
+    assert len(sizes["states"]) == 2 and switch == [False]      # one law's pass in each counted step, none timed
     streamed, whole = sizes["states"][0]
     assert streamed >= 2 * cells * 6 * 8 and whole > 0          # at least U and Q (n, 6), cut by rows
     split = script.between(times, 2)
