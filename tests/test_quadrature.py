@@ -99,6 +99,46 @@ def test_inactive_cells_carry_no_dofs_and_body_boundary_is_named_surface():
 
 
 @pytest.mark.parametrize("d", [1, 2])
+def test_named_facets_follow_their_vertices_to_the_active_mesh(d):
+    """Each named facet set of the sub-mesh (active cells renumbered, named facets matched by
+    their vertices' keys) is, by coordinates, exactly the named facets of the full mesh that lie
+    on an active cell, in increasing order; the same after a mesh's quads are turned clockwise
+    and back (`grid._counter_clockwise`), and with the nodes renumbered at random (the new facets
+    then in another order than their keys). Reference: facet midpoints, not node numbers."""
+    from skdgmpm.grid import _counter_clockwise, _with_facet_names, line
+
+    mesh = line(2.0, 40) if d == 1 else rectangle(3.0, 2.0, 30, 20)
+    mid = lambda m, f: np.round(m.p[:, m.facets[:, f]].mean(axis=1).T, 9)       # noqa: E731
+    x = mid(mesh, np.arange(mesh.nfacets))
+    names = {"low": np.flatnonzero(x[:, -1] < 0.7), "odd": np.arange(1, mesh.nfacets, 7), "none": np.zeros(0, int)}
+    mesh = mesh.with_boundaries(names)
+    centre = mesh.p[:, mesh.t].mean(axis=1)
+    active = np.flatnonzero(np.hypot(*(centre - 1.0)) < 0.8 if d == 2 else centre[0] > 0.55)
+    grid = Grid(mesh, active)
+    sub = grid.submesh
+    on_active = set(np.ravel(mesh.t2f[:, active]).tolist())
+    for name, facets in names.items():
+        kept = [f for f in facets.tolist() if f in on_active]
+        got = sub.boundaries[name]
+        assert np.all(np.diff(got) > 0)
+        assert sorted(map(tuple, mid(sub, got))) == sorted(map(tuple, mid(mesh, np.array(kept, int))))
+    perm = np.random.default_rng(d).permutation(mesh.p.shape[1])      # new node i: old node perm[i]
+    renumbered = type(mesh)(mesh.p[:, perm], np.argsort(perm)[mesh.t])  # its facets in another order
+    renumbered = _with_facet_names(renumbered, mesh, names, perm)
+    for name, facets in names.items():
+        got = renumbered.boundaries[name]
+        assert np.all(np.diff(got) > 0)
+        assert sorted(map(tuple, mid(renumbered, got))) == sorted(map(tuple, mid(mesh, facets)))
+    if d == 2:                              # every quad listed clockwise, then turned back
+        cw = _with_facet_names(type(mesh)(mesh.p, mesh.t[[0, 3, 2, 1]]), mesh, names, np.arange(mesh.p.shape[1]))
+        back = _counter_clockwise(cw)
+        for name, facets in names.items():
+            got = back.boundaries[name]
+            assert np.all(np.diff(got) > 0)
+            assert sorted(map(tuple, mid(back, got))) == sorted(map(tuple, mid(mesh, facets)))
+
+
+@pytest.mark.parametrize("d", [1, 2])
 def test_chunked_particle_operators_are_the_whole_grid_ones(monkeypatch, d):
     """`particle_operators` (a chunk of cells at a time, to bound the set-up's memory) gives the
     lumped mass, the K^alpha on their common pattern and S of one particle basis over all the
