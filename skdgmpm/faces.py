@@ -155,16 +155,16 @@ def interior_faces(mesh, element, pointwise=False, intorder=None, coordinates=Tr
     # otherwise compute both over the whole mesh for each basis (set-up time quadratic in the cells)
     kw.update(dofs=Dofs(mesh, element), disable_doflocs=True)
     for chunk in np.array_split(interior, max(1, -(-len(interior) // FACET_CHUNK))):
-        # side R's basis only for its traces: its cells are scikit-fem's f2t[1] (half the set-up)
+        # side R's basis only for its traces: its cells are scikit-fem's f2t[1] of the facets
+        # (its `tind`), read without it (half the set-up)
         fb = [InteriorFacetBasis(mesh, element, side=i, facets=chunk, **kw) for i in ((0, 1) if traces else (0,))]
         if traces:
             T_L, measure = trace(fb[0])
             T_R, _ = trace(fb[1])
-            cell_R = _rows(fb[1], pointwise, False)[2]
         else:
             T_L = T_R = None
             measure = fb[0].dx.sum(axis=1) if not pointwise else fb[0].dx.ravel()
-            cell_R = np.repeat(mesh.f2t[1, fb[0].find], fb[0].dx.shape[1] if pointwise else 1)
+        cell_R = np.repeat(mesh.f2t[1, fb[0].find], fb[0].dx.shape[1] if pointwise else 1)
         facets, normal, cell_L, X = _rows(fb[0], pointwise, coordinates)
         parts.append((facets, normal, measure, cell_L, cell_R, T_L, T_R, X))
         del fb
