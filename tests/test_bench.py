@@ -342,3 +342,44 @@ def test_pass_scaling_pairs_every_pass_and_sizes_its_arrays(monkeypatch):
             2: {"a": [2.0, 3.0], "b": [0.5, 0.5], "step": [3.0, 4.0]}}
     (p1, r1), (p2, r2) = script.between(fake, 2).values()       # worked by hand
     assert p1.tolist() == [4.0, 6.0] and p2.tolist() == [2.5, 3.5] and r1.tolist() == r2.tolist() == [0.5, 0.5]
+
+
+def test_step_replay_runs_the_captured_passes_again_on_any_thread_count(monkeypatch):
+    """bench/step_replay.py: one DCU step at 32^2 (MIN_ROWS 16: its passes in compiled chunk
+    loops) captured as its three passes; each replay, from the arrays copied back, computes the
+    same bits on 1 and on 2 threads (so every replay does the same arithmetic on a valid state:
+    none of its passes stops at a failed health check), and it computes: the arrays it writes
+    differ from those it started from. The measurement gives a time per round to each kind and
+    count."""
+    import importlib.util
+    from pathlib import Path
+    from skdgmpm import bench, parallel
+    from skdgmpm.build import build
+
+    path = Path(__file__).parent.parent / "bench" / "step_replay.py"
+    spec = importlib.util.spec_from_file_location("step_replay", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    monkeypatch.setattr(parallel, "MIN_ROWS", 16)
+    try:
+        stepping = bench.Stepping(build(bench.scene_for("dgmpm-dcu", 32)))
+        bench._use_threads(2)
+        stepping()
+        replay = script.Replay(stepping)
+        assert replay.names == ["interior_pass", "boundary_faces", "states"]
+        assert all(loop is not None for _, _, loop, *_ in replay.passes)    # compiled chunk loops, not `chunked`
+        results = []
+        for t in (1, 2, 2):
+            bench._use_threads(t)
+            replay.restore()
+            replay()
+            results.append([a.copy() for a, _ in replay.saved])
+        assert replay.stopped == 0
+        for other in results[1:]:
+            assert all(np.array_equal(a, b, equal_nan=True) for a, b in zip(results[0], other))
+        assert any(not np.array_equal(a, saved, equal_nan=True) for a, (_, saved) in zip(results[0], replay.saved))
+        times, replay = script.measure("dgmpm-dcu", 32, 2, 2, warmup=1)
+        assert sorted(times) == sorted((kind, t) for kind in ("step", "replay") for t in (1, 2))
+        assert all(len(v) == 2 and min(v) > 0 for v in times.values()) and replay.stopped == 0
+    finally:
+        parallel.set_threads(None)
