@@ -4,16 +4,18 @@
 
 A compiled driver would run a step's passes (the compiled chunk loops of `parallel.chunked`) one
 after the other, with no Python between them. This measures what that could gain before anyone
-builds it: one step of a second simulation of the bench's plate is captured (each pass's chunk
-loop and flattened arguments, in order), then replayed as captured, each pass's loop called
-directly on the chunks of the thread count at hand. Before each replay the arrays the passes
-write are copied back as they were after the captured step (untimed), so every replay does the
-same arithmetic on the same valid state (without it, each replay fed on the last one's output
-and its passes stopped early at a failed health check). The real step and the replay run in turn
-on 1 and ``--threads`` threads (ABBA); printed: medians and per-round speed-ups of each. The
-replay leaves out the step's Python and its serial compiled code (the boundary's corrections
-and terms, a few thousand faces): its speed-up bounds what any driver could reach on this
-machine in these minutes. Timings are measurements on the machine at hand, not test results.
+builds it. Each round, on 1 and ``--threads`` threads in turn (ABBA), the bench plate's step is
+timed while its passes are captured (each one's chunk loop and arguments, in order), then those
+passes are replayed at once, back to back, on the state the step left: the arrays they write are
+saved before and put back after (untimed), so the simulation goes on from its own step, and the
+replay does one more step's arithmetic on the state of the step beside it. On several threads a
+replayed pass runs its compiled chunk loop on the chunks `chunked` would use; on one, its kernel
+on the whole range, as `chunked` calls it (a one-chunk compiled loop ran the law's pass 2-7 %
+faster than that, which biased a first version). The replay leaves out the step's Python and
+its serial compiled code (the boundary's corrections and terms, a few thousand faces): its
+speed-up bounds what a driver could reach on this machine in these minutes. Printed: medians
+and per-round speed-ups of each, and their difference round by round. Timings are measurements
+on the machine at hand, not test results.
 """
 import argparse
 import time
@@ -25,89 +27,101 @@ from skdgmpm.build import build
 
 
 class Replay:
-    """A step's passes, captured from ``stepping`` (a `bench.Stepping`) in one step, to replay."""
+    """The threaded passes of one step of ``stepping`` (a `bench.Stepping`), captured as the step
+    runs (`seconds`: its wall time, the capture's few appends within), to replay on the state the
+    step left."""
 
     def __init__(self, stepping):
         calls, chunked = [], parallel.chunked
 
         def capture(n, kernel, spec, args, returns=0, min_rows=None):
-            result = chunked(n, kernel, spec, args, returns, min_rows)
             calls.append((n, min_rows, kernel, spec, args, returns))
-            return result
+            return chunked(n, kernel, spec, args, returns, min_rows)
         parallel.chunked = capture
         try:
+            t0 = time.perf_counter()
             stepping()
+            self.seconds = time.perf_counter() - t0
         finally:
             parallel.chunked = chunked
         self.names = [getattr(kernel, "__name__", "chunked") for _, _, kernel, *_ in calls]
         self.passes, written = [], {}
         for n, min_rows, kernel, spec, args, returns in calls:
-            plan = parallel._PLANS.get((kernel, spec, returns))     # made where the step ran a chunk loop
-            if plan is None:                # a pass of one chunk: replayed through `chunked`
+            plan = parallel._PLANS.get((kernel, spec, returns))     # made where a step ran a chunk loop
+            if plan is None:                # never on several threads: replayed through `chunked`
                 self.passes.append((n, min_rows, None, (kernel, spec, args, returns), None, False))
                 flat = []
                 parallel._shape(args, flat)
             else:
                 flat = plan[1](args)
+                whole = kernel, parallel._sliced(parallel._parsed(spec), args, 0, n, 0)
                 width = 1 if returns == "first" else max(returns, 1)
-                self.passes.append((n, min_rows, plan[0], width, flat, returns == "first"))
+                self.passes.append((n, min_rows, plan[0], width, (flat, whole), returns == "first"))
             for a in flat:
                 if isinstance(a, np.ndarray) and a.size and a.flags.writeable:
                     written[id(a)] = a
-        self.saved = [(a, a.copy()) for a in written.values()]
+        self.written = list(written.values())
+        self.saved = None
         self.stopped = 0                    # replayed passes that returned a failing row
 
+    def save(self):
+        """Copy the arrays the passes write (the simulation's state among them)."""
+        self.saved = [a.copy() for a in self.written]
+
     def restore(self):
-        """The passes' arrays as they were after the captured step."""
-        for a, saved in self.saved:
+        """The arrays the passes write as `save` found them: the simulation goes on as if never
+        replayed."""
+        for a, saved in zip(self.written, self.saved):
             np.copyto(a, saved)
 
     def __call__(self):
         """The passes once, back to back, on the current thread count."""
-        for n, min_rows, loop, width, flat, first in self.passes:
+        for n, min_rows, loop, width, arguments, first in self.passes:
             if loop is None:
                 kernel, spec, args, returns = width
                 result = parallel.chunked(n, kernel, spec, args, returns, min_rows)
-                if returns == "first" and result >= 0:
-                    self.stopped += 1
+                self.stopped += returns == "first" and result >= 0
                 continue
+            flat, (kernel, whole) = arguments
             bounds = parallel.compiled_chunks(n, min_rows)
-            if bounds is None:              # one chunk (`chunked` would call the kernel once): one chunk here
-                parallel._numba_threads(1)
-                bounds = np.array([0, n], np.int64)
+            if bounds is None:              # one chunk: the kernel on the whole range, as `chunked` calls it
+                result = kernel(*whole)
+                self.stopped += first and result >= 0
+                continue
             out = np.full((len(bounds) - 1, width), -1.0)
             loop(bounds, out, *flat)
-            if first and (out[:, 0] >= 0).any():
-                self.stopped += 1
+            self.stopped += first and bool((out[:, 0] >= 0).any())
 
 
 def measure(method, n, threads, rounds, warmup=3):
-    """{(kind, count): [seconds]} for kind "step" (the plate's step) and "replay" (the `Replay`
-    of another simulation of it), on 1 and ``threads`` threads in turn (ABBA), ``rounds`` timed
-    rounds after ``warmup``; and the replay."""
-    step, other = (bench.Stepping(build(bench.scene_for(method, n))) for _ in range(2))
+    """{(kind, count): [seconds]}: kind "step", the bench plate's step, captured (`Replay`), and
+    "replay", its passes replayed at once on the state it left (saved before, put back after,
+    both untimed: the simulation goes on from its own step), on 1 and ``threads`` threads in turn
+    (ABBA), ``rounds`` timed rounds after ``warmup``; and the replayed passes that stopped early."""
+    stepping = bench.Stepping(build(bench.scene_for(method, n)))
     previous = parallel.set_threads(1)
+    times = {(kind, t): [] for kind in ("step", "replay") for t in (1, threads)}
+    stopped, names = 0, None
     try:
-        for t in (1, threads):              # every chunk loop made, on both counts
+        for t in (1, threads):              # every chunk loop made
             bench._use_threads(t)
-            step()
-            other()
-        replay = Replay(other)
-        times = {(kind, t): [] for kind in ("step", "replay") for t in (1, threads)}
+            stepping()
         for k in range(warmup + rounds):
             for t in ((1, threads) if k % 2 == 0 else (threads, 1)):
                 bench._use_threads(t)
-                for kind, run in (("step", step), ("replay", replay)):
-                    if kind == "replay":
-                        replay.restore()
-                    t0 = time.perf_counter()
-                    run()
-                    seconds = time.perf_counter() - t0
-                    if k >= warmup:
-                        times[kind, t].append(seconds)
+                replay = Replay(stepping)
+                replay.save()
+                t0 = time.perf_counter()
+                replay()
+                seconds = time.perf_counter() - t0
+                replay.restore()
+                stopped, names = stopped + replay.stopped, replay.names
+                if k >= warmup:
+                    times["step", t].append(replay.seconds)
+                    times["replay", t].append(seconds)
     finally:
         parallel.set_threads(previous)
-    return times, replay
+    return times, names, stopped
 
 
 def main():
@@ -118,8 +132,8 @@ def main():
     parser.add_argument("--rounds", type=int, default=40)
     args = parser.parse_args()
     t = args.threads
-    times, replay = measure(args.method, args.size, t, args.rounds)
-    print(f"{args.method} {args.size}^2, the step and its passes back to back ({', '.join(replay.names)}), "
+    times, names, stopped = measure(args.method, args.size, t, args.rounds)
+    print(f"{args.method} {args.size}^2, the step and its passes back to back ({', '.join(names)}), "
           f"1 and {t} threads in turn, {args.rounds} rounds (ABBA); median per step, per-round speed-up (quartiles)")
     for kind in ("step", "replay"):
         one, many = np.array(times[kind, 1]), np.array(times[kind, t])
@@ -128,7 +142,7 @@ def main():
     gain = np.array(times["replay", 1]) / np.array(times["replay", t]) - (
         np.array(times["step", 1]) / np.array(times["step", t]))
     print(f"  the replay's speed-up less the step's, round by round: median {np.median(gain):+.2f}; "
-          f"replayed passes stopped early: {replay.stopped}")
+          f"replayed passes stopped early: {stopped}")
 
 
 if __name__ == "__main__":

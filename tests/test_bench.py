@@ -344,13 +344,12 @@ def test_pass_scaling_pairs_every_pass_and_sizes_its_arrays(monkeypatch):
     assert p1.tolist() == [4.0, 6.0] and p2.tolist() == [2.5, 3.5] and r1.tolist() == r2.tolist() == [0.5, 0.5]
 
 
-def test_step_replay_runs_the_captured_passes_again_on_any_thread_count(monkeypatch):
-    """bench/step_replay.py: one DCU step at 32^2 (MIN_ROWS 16: its passes in compiled chunk
-    loops) captured as its three passes; each replay, from the arrays copied back, computes the
-    same bits on 1 and on 2 threads (so every replay does the same arithmetic on a valid state:
-    none of its passes stops at a failed health check), and it computes: the arrays it writes
-    differ from those it started from. The measurement gives a time per round to each kind and
-    count."""
+def test_step_replay_runs_a_steps_passes_again_and_puts_the_state_back(monkeypatch):
+    """bench/step_replay.py: a DCU step at 32^2 (MIN_ROWS 16: its passes in compiled chunk
+    loops) captured as its three passes; replayed on the state it left, saved and put back, the
+    replay computes (the arrays it writes change) the same bits on 1 and 2 threads, and after it
+    the simulation goes on bit for bit as a second one never replayed. The measurement gives each
+    kind and count a time per round, and no replayed pass stops at a failed health check."""
     import importlib.util
     from pathlib import Path
     from skdgmpm import bench, parallel
@@ -362,24 +361,35 @@ def test_step_replay_runs_the_captured_passes_again_on_any_thread_count(monkeypa
     spec.loader.exec_module(script)
     monkeypatch.setattr(parallel, "MIN_ROWS", 16)
     try:
-        stepping = bench.Stepping(build(bench.scene_for("dgmpm-dcu", 32)))
+        replayed, plain = (bench.Stepping(build(bench.scene_for("dgmpm-dcu", 32))) for _ in range(2))
         bench._use_threads(2)
-        stepping()
-        replay = script.Replay(stepping)
-        assert replay.names == ["interior_pass", "boundary_faces", "states"]
+        replayed()
+        plain()
+        replay = script.Replay(replayed)
+        plain()
+        assert replay.names == ["interior_pass", "boundary_faces", "states"] and replay.seconds > 0
         assert all(loop is not None for _, _, loop, *_ in replay.passes)    # compiled chunk loops, not `chunked`
+        replay.save()
         results = []
         for t in (1, 2, 2):
             bench._use_threads(t)
             replay.restore()
             replay()
-            results.append([a.copy() for a, _ in replay.saved])
+            results.append([a.copy() for a in replay.written])
         assert replay.stopped == 0
         for other in results[1:]:
             assert all(np.array_equal(a, b, equal_nan=True) for a, b in zip(results[0], other))
-        assert any(not np.array_equal(a, saved, equal_nan=True) for a, (_, saved) in zip(results[0], replay.saved))
-        times, replay = script.measure("dgmpm-dcu", 32, 2, 2, warmup=1)
+        assert any(not np.array_equal(a, b, equal_nan=True) for a, b in zip(results[0], replay.saved))
+        replay.restore()
+        for _ in range(2):
+            replayed()
+            plain()
+        assert replayed.state.t == plain.state.t and replayed.state.step == plain.state.step
+        for name in ("U", "Q", "x"):
+            assert np.array_equal(getattr(replayed.state, name), getattr(plain.state, name)), name
+        times, names, stopped = script.measure("dgmpm-dcu", 32, 2, 2, warmup=1)
         assert sorted(times) == sorted((kind, t) for kind in ("step", "replay") for t in (1, 2))
-        assert all(len(v) == 2 and min(v) > 0 for v in times.values()) and replay.stopped == 0
+        assert all(len(v) == 2 and min(v) > 0 for v in times.values()) and stopped == 0
+        assert names == replay.names
     finally:
         parallel.set_threads(None)
