@@ -12,6 +12,9 @@ only (`install`; every other file keeps numba's own locators), files every kerne
 
     <base>/kernels-<digest>/<package>/        (<package>: skdgmpm, skdgmpm.materials, ...)
 
+(kernels-<digest>-debug, ... where numba's settings make other code of the same kernels:
+`build_tag`)
+
 where <digest> hashes every source file of the package that compiles code (by its name within
 the package), and the numba version; the digest is also each kernel's source stamp. An edit anywhere in the package
 thus compiles afresh, and every environment with the same sources and numba version shares one
@@ -139,9 +142,28 @@ def cache_base():
                         "skdgmpm")
 
 
+def build_tag():
+    """The numba settings in force that change the code it compiles but not its cache's index
+    (which keys a kernel on its signature and target only), as a folder suffix: "" where none is;
+    "debug" (NUMBA_DEBUGINFO, NUMBA_ENABLE_PROFILING), "boundscheck" (NUMBA_BOUNDSCHECK), "opt<n>"
+    (NUMBA_OPT other than 3). Kernels compiled under one are filed apart from the others: a
+    profiling run's debug builds, filed with them, made every later run's CTU passes two to four
+    times slower (docs/bench/session37.md)."""
+    tags = []
+    if config.DEBUGINFO_DEFAULT or config.ENABLE_PROFILING:
+        tags.append("debug")
+    if config.BOUNDSCHECK:
+        tags.append("boundscheck")
+    if int(config.OPT) != 3:
+        tags.append(f"opt{int(config.OPT)}")
+    return "-".join(tags)
+
+
 def cache_dir():
-    """The directory of this package's kernels: <base>/kernels-<source digest>."""
-    return os.path.join(cache_base(), f"kernels-{source_digest()}")
+    """The directory of this package's kernels: <base>/kernels-<source digest>, with
+    -<`build_tag`> where numba compiles otherwise than by default."""
+    tag = build_tag()
+    return os.path.join(cache_base(), f"kernels-{source_digest()}" + (f"-{tag}" if tag else ""))
 
 
 class Locator(_CacheLocator):

@@ -211,3 +211,39 @@ def test_each_variant_of_a_factory_has_its_own_name_whichever_process_compiled_i
     assert len(set(names)) == 2 and all(re.fullmatch(r"_scaled\.<locals>\.scaled_\d_[0-9a-f]{12}", n) for n in names)
     assert kernel_cache.variant_qualname("f", ()) == "f"
     assert kernel_cache.variant_qualname("f", (1,)) != kernel_cache.variant_qualname("f", (-1,))
+
+
+def test_kernels_compiled_with_debug_information_are_filed_apart(tmp_path, monkeypatch):
+    """numba's cache index keys a kernel on its signature and target, not on how it was compiled:
+    a run with NUMBA_DEBUGINFO or NUMBA_ENABLE_PROFILING filed debug builds where every later run
+    loaded them (two to four times slower, docs/bench/session37.md). `build_tag` files them in
+    kernels-<digest>-debug: a plain process after a debug one compiles its own kernel (a cache
+    miss), and the next plain one loads it; `skdgmpm cache` lists the debug folder and prunes it."""
+    from numba import config
+    from skdgmpm import cache_folders
+
+    for name, value, tag in (("DEBUGINFO_DEFAULT", 1, "debug"), ("ENABLE_PROFILING", 1, "debug"),
+                             ("BOUNDSCHECK", 1, "boundscheck"), ("OPT", 0, "opt0")):
+        with monkeypatch.context() as m:
+            m.setattr(config, name, value)
+            assert kernel_cache.build_tag() == tag
+            assert Path(kernel_cache.cache_dir()).name == f"kernels-{kernel_cache.source_digest()}-{tag}"
+    assert kernel_cache.build_tag() == ""
+    code = ("import json, numpy as np, skdgmpm.kernel_cache as k; from skdgmpm import system; "
+            "e = system._embed(2); e(np.zeros((3, 4)), np.zeros((3, 3, 3))); "
+            "print(json.dumps([k.cache_dir(), sum(e.stats.cache_hits.values()), sum(e.stats.cache_misses.values())]))")
+    cache = tmp_path / "cache"
+    runs = []
+    for debug in (True, False, False):
+        env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "NUMBA_DEBUGINFO")}
+        env.update({"NUMBA_CACHE_DIR": str(cache)}, **({"NUMBA_DEBUGINFO": "1"} if debug else {}))
+        out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr
+        runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
+    (debug_dir, _, _), (plain_dir, hits, misses), (_, hits_again, _) = runs
+    assert Path(debug_dir).name.endswith("-debug") and Path(plain_dir) == Path(debug_dir[:-len("-debug")])
+    assert any(Path(debug_dir, "skdgmpm").glob("system._embed*.nbc"))
+    assert hits == 0 and misses == 1                    # compiled: the debug build not taken
+    assert hits_again == 1
+    rows = cache_folders.folders(cache)
+    assert sorted(Path(row[0]).name for row in rows) == sorted([Path(debug_dir).name, Path(plain_dir).name])
