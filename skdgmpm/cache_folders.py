@@ -4,8 +4,8 @@ and pruned (``skdgmpm cache [--prune]``).
 Every edit of a file with compiled code, and every release, files its kernels under a new digest
 (60-70 MB for every method and dimension); the folders of other digests stay until removed: a
 second checkout or venv with other sources uses its own. Only folders named ``kernels-<16 hex
-digits>`` (and a `kernel_cache.build_tag` suffix) directly under the cache's base are touched, never anything else there (the base may be
-a $NUMBA_CACHE_DIR that other code shares).
+digits>`` (with a `kernel_cache.build_tag` suffix or none) directly under the cache's base are
+touched, never anything else there (the base may be a $NUMBA_CACHE_DIR that other code shares).
 """
 import os
 import re
