@@ -49,7 +49,7 @@ class Replay:
         for n, min_rows, kernel, spec, args, returns in calls:
             plan = parallel._PLANS.get((kernel, spec, returns))     # made where a step ran a chunk loop
             if plan is None:                # never on several threads: replayed through `chunked`
-                self.passes.append((n, min_rows, None, (kernel, spec, args, returns), None, False))
+                self.passes.append((n, min_rows, None, 0, (kernel, spec, args, returns), False))
                 flat = []
                 parallel._shape(args, flat)
             else:
@@ -78,7 +78,7 @@ class Replay:
         """The passes once, back to back, on the current thread count."""
         for n, min_rows, loop, width, arguments, first in self.passes:
             if loop is None:
-                kernel, spec, args, returns = width
+                kernel, spec, args, returns = arguments
                 result = parallel.chunked(n, kernel, spec, args, returns, min_rows)
                 self.stopped += returns == "first" and result >= 0
                 continue
