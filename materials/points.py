@@ -216,26 +216,44 @@ def _stress_tangent_point(laws_, params_, m_, only_, F_, h_n_, h_, P_, C_, d_):
     return _impl(STRESS_TANGENT, _typed_for(only_), (("m_", "F_", ("h_n_", "h_", "P_", "C_", "d_")),))
 
 
-@njit(cache=True)
-def _tangent_called(laws, params, m, F, C, d):
-    """`tangent_point` for any law as a function of its own, compiled once and called."""
-    tangent_point(laws, params, m, ANY_LAW, F, C, d)
+@kernel_factory
+def _tangent_of(only):                  # a literal: that law's code alone, ANY_LAW: every law's
+    def tangent_of(laws, params, m, F, C, d):
+        """`tangent_point` as a function of its own, compiled once per law and called."""
+        tangent_point(laws, params, m, only, F, C, d)
+    return tangent_of
+
+
+def _tangent_called(laws, params, m, only, F, C, d):
+    """`_tangent_of(only)` called from compiled code (the overload below). Compiled code only."""
+    raise TypeError("_tangent_called is compiled code's")
+
+
+@overload(_tangent_called, inline="always", prefer_literal=True)
+def _tangent_called_for(laws_, params_, m_, only_, F_, C_, d_):
+    kernel = _tangent_of(_typed_for(only_))     # chosen as the caller is typed, for its literal law
+
+    def impl(laws_, params_, m_, only_, F_, C_, d_):
+        kernel(laws_, params_, m_, F_, C_, d_)
+    return impl
 
 
 @njit(cache=True, inline="always")
-def tangent_call(laws, params, m, F, C, d):
-    """`tangent_point` of any law called, not inlined: the 1D loops call it (every law compiled
-    once, not inlined at each call site: their compile time halves), the 2D ones inline
-    `tangent_point` (the tangent stays in registers: the hot loops) and call it on a rare path.
-    The choice is made at the top of each kernel (``if d == 1:``), where numba prunes the other
-    branch before typing; inside an inlined helper both branches would be compiled. F and C go
-    through stack copies: an array handed to a call escapes, and the caller's would then stay in
-    memory through its whole loop (a tenth of the DGMPM law pass)."""
+def tangent_call(laws, params, m, only, F, C, d):
+    """`tangent_point` called, not inlined: the 1D loops call it (a law's code compiled once, not
+    inlined at each call site: their compile time halves), the 2D ones inline `tangent_point`
+    (the tangent stays in registers: the hot loops) and call it on a rare path. The function
+    called is made for ``only`` (`_tangent_of`): a scene of one law compiles that law alone (for
+    any law, the seven laws' 1D tangents took 9 s of a 1D bar's first run). The choice is made at
+    the top of each kernel (``if d == 1:``), where numba prunes the other branch before typing;
+    inside an inlined helper both branches would be compiled. F and C go through stack copies:
+    an array handed to a call escapes, and the caller's would then stay in memory through its
+    whole loop (a tenth of the DGMPM law pass)."""
     F_c, C_c = scratch((3, 3)), scratch((d, d, d, d))
     for i in range(3):
         for a in range(3):
             F_c[i, a] = F[i, a]
-    _tangent_called(laws, params, m, F_c, C_c, d)
+    _tangent_called(laws, params, m, only, F_c, C_c, d)
     for i in range(d):
         for a in range(d):
             for j in range(d):

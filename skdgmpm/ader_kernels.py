@@ -50,8 +50,8 @@ def _interior_flux_sum(d, only):        # literals: the (d, d) loops unrolled, o
                 _gather(T_L, f, u_flat, q_flat, q_L, F_L, d, s * n_points)
                 _gather(T_R, f, u_flat, q_flat, q_R, F_R, d, s * n_points)
                 if d == 1:              # the law called, not inlined (`points.tangent_call`)
-                    tangent_call(laws, params, mat_L[f], F_L, C_L, d)
-                    tangent_call(laws, params, mat_R[f], F_R, C_R, d)
+                    tangent_call(laws, params, mat_L[f], only, F_L, C_L, d)
+                    tangent_call(laws, params, mat_R[f], only, F_R, C_R, d)
                 else:
                     tangent_points(laws, params, mat_L[f], mat_R[f], only, F_L, F_R, C_L, C_R, d)
                 if not riemann(q_L, C_L, rho_L[f], q_R, C_R, rho_R[f], n, t_L, t_R, t_s, v_s, d):

@@ -86,7 +86,7 @@ def _states(d, assess, gathered, slots, split, only, sides, n_faces):   # litera
                 finite[k] = ok
                 if not ok or d == 1:        # not finite: the health of F = I; 1D: the tangent called apart
                     identity_if_not(ok, F)
-                    tangent_call(laws, params, m, F, C, d)
+                    tangent_call(laws, params, m, only, F, C, d)
                 J[k], lo, speed[k] = health_point(F, C, rho_m[m], d)
                 lowest[k] = lo if ok else np.nan
                 first, J_min, omega_min, fastest = tally(k, ok, J[k], lowest[k], speed[k], first, J_min, omega_min,
@@ -137,7 +137,7 @@ def _stresses(d, assess, only):         # literals: the loops unrolled, the heal
                 finite[k] = ok
                 if not ok or d == 1:        # not finite: the health of F = I; 1D: the tangent called apart
                     identity_if_not(ok, F)
-                    tangent_call(laws, params, m, F, C, d)
+                    tangent_call(laws, params, m, only, F, C, d)
                 J[k], lo, speed[k] = health_point(F, C, rho_m[m], d)
                 lowest[k] = lo if ok else np.nan
                 first, J_min, omega_min, fastest = tally(k, ok, J[k], lowest[k], speed[k], first, J_min, omega_min,

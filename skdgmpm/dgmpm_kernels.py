@@ -289,7 +289,7 @@ def _cell_records(d, slots, nodes, split, only):
             embed(u, F, d)
             m = cell_material[c]
             if d == 1:
-                tangent_call(laws, params, m, F, C, d)
+                tangent_call(laws, params, m, only, F, C, d)
             else:
                 tangent_point(laws, params, m, only, F, C, d)
             write_record(q, rho[n0], C, normals, c, rec, state, n_c, r, d, slots, split)
@@ -340,9 +340,9 @@ def _interior_pass(d, slots, recorded, only):  # literals: the loops unrolled, t
                 m_L, m_R = cell_material[c_L], cell_material[c_R]
                 if d == 1:                          # the law called, not inlined (`points.tangent_call`)
                     if trace_L:
-                        tangent_call(laws, params, m_L, F_L, C_L, d)
+                        tangent_call(laws, params, m_L, only, F_L, C_L, d)
                     if trace_R:
-                        tangent_call(laws, params, m_R, F_R, C_R, d)
+                        tangent_call(laws, params, m_R, only, F_R, C_R, d)
                 elif trace_L or trace_R:            # both sides' tangents, one inlined law (a recorded side's unused)
                     identity_if_not(trace_L, F_L)
                     identity_if_not(trace_R, F_R)
@@ -534,7 +534,7 @@ def _boundary_faces(d, slots, only):
                 rho_f = _gather(T, f, U, Q, rho, q, F, d)
                 m = cell_material[c]
                 if d == 1:
-                    tangent_call(laws, params, m, F, C, d)
+                    tangent_call(laws, params, m, only, F, C, d)
                 else:
                     tangent_point(laws, params, m, only, F, C, d)
                 if not impedance(C, n, rho_f, Z, Zi, d):

@@ -197,7 +197,7 @@ def _assess(d, only):                   # literals: the (d, d) loops unrolled, o
             identity_if_not(ok, F)
             m = material[p]
             if d == 1:
-                tangent_call(laws, params, m, F, C, d)
+                tangent_call(laws, params, m, only, F, C, d)
             else:
                 tangent_point(laws, params, m, only, F, C, d)
             J[p], lo, speed[p] = health_point(F, C, rho[m], d)

@@ -94,8 +94,8 @@ def _trace_fluxes(d, traced, only):    # traced: 1 if Q is traced (a law with hi
                 flux_state(P_L, q_L, rho_L[f], q_L, d)      # q's p read before its v is written, entry by entry
                 flux_state(P_R, q_R, rho_R[f], q_R, d)
             if d == 1:                  # the law called, not inlined (`points.tangent_call`)
-                tangent_call(laws, params, m_L, F_L, c_L, d)
-                tangent_call(laws, params, m_R, F_R, c_R, d)
+                tangent_call(laws, params, m_L, only, F_L, c_L, d)
+                tangent_call(laws, params, m_R, only, F_R, c_R, d)
             else:
                 tangent_points(laws, params, m_L, m_R, only, F_L, F_R, c_L, c_R, d)
             if not riemann(q_L, c_L, rho_L[f], q_R, c_R, rho_R[f], n, t_L, t_R, t_s, v_s, d):
