@@ -393,3 +393,37 @@ def test_step_replay_runs_a_steps_passes_again_and_puts_the_state_back(monkeypat
         assert names == replay.names
     finally:
         parallel.set_threads(None)
+
+
+def test_compile_times_records_each_compilation_once_with_its_depth():
+    """bench/compile_times.py: a function compiled while its caller compiles is recorded one
+    level deeper, inside the caller's time; a signature compiled already is not recorded again,
+    a new one is; the dispatcher is put back as it was."""
+    import importlib.util
+    from pathlib import Path
+    from numba import njit
+    from numba.core import dispatcher
+
+    path = Path(__file__).parent.parent / "bench" / "compile_times.py"
+    spec = importlib.util.spec_from_file_location("compile_times", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+
+    @njit
+    def inner(x):
+        return 2.0 * x
+
+    @njit
+    def outer(x):
+        return inner(x) + 1.0
+
+    before = dispatcher.Dispatcher.compile
+    with script.timed_compiles() as records:
+        assert outer(1.0) == 3.0 and outer(2.0) == 5.0 and outer(3) == 7.0
+    assert dispatcher.Dispatcher.compile is before
+    # outer(float64) with inner(float64) inside it, outer(2.0) found made, then both for int64
+    made = [(function.py_func.__name__, depth) for _, depth, function, _ in records]
+    assert made == [("inner", 1), ("outer", 0)] * 2
+    assert all(0 < records[k][0] <= records[k + 1][0] for k in (0, 2))     # inside its caller's time
+    front, llvm = script.split(outer)
+    assert front > 0 and llvm > 0 and script.name(outer).endswith("outer")
