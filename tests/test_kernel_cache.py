@@ -166,7 +166,6 @@ def test_a_scene_compiles_the_kernels_of_its_own_dimension_only(tmp_path):
     assert embed == impedances == [[1]] and volume_flux == []
 
 
-
 ONE_LAW = ("import json, numpy as np; from types import SimpleNamespace\n"
            "from skdgmpm import health, system; from skdgmpm.constitutive import MaterialSet\n"
            "from skdgmpm.materials import LinearElastic; from skdgmpm.materials.points import _tangent_of\n"
@@ -182,6 +181,7 @@ def test_a_1d_kernel_of_one_law_compiles_that_laws_tangent_alone(tmp_path):
     law's: 9 s of a 1D bar's first run)."""
     (law_id, made, finite), _ = python(ONE_LAW, cwd=tmp_path, cache=tmp_path / "cache")
     assert made == [[law_id]] and finite
+
 
 VARIANTS = '''
 from skdgmpm.kernel_cache import kernel_factory
