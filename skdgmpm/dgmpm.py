@@ -190,6 +190,11 @@ class DGMPM(GodunovScheme):
         describe once the step is accepted; `interface_flux` computes them for any other state."""
         return self._record_arrays
 
+    def _every_cell_recorded(self, state):
+        """Whether every cell of the records' ``state`` is recorded (always with one particle per
+        cell): the face passes then read no trace, and are compiled without that path."""
+        return self.cellwise or bool(np.all(state != 0))
+
     # ---------------------------------------------------------------- set-up
     def _setup_cell_faces(self):
         """What `cell_records` and the face pass read: each cell's nodes (n_cells, nodes), the local
@@ -312,8 +317,7 @@ class DGMPM(GodunovScheme):
         made, self._records_of = self._records_of, None     # the buffer is rewritten from here on
         if made is None or made[0] is not grid_state.U or made[1] is not grid_state.Q:
             cell_records(dofs, grid_state.U, grid_state.Q, rho, self.cell_material, *laws, normals, rec, state)
-        # every cell recorded (one particle per cell always): the faces read no trace
-        recorded = self.cellwise or bool(np.all(state != 0))
+        recorded = self._every_cell_recorded(state)
         # CTU: with every cell recorded, the faces keep their fluctuations (nf, 2, nc) and each cell
         # sends the parts of those entering it (`cell_corrections`), in place; otherwise the faces
         # split them and keep the parts (nf, 4, nc), which each edge gathers
@@ -359,7 +363,8 @@ class DGMPM(GodunovScheme):
         rec, state = self._records()
         args = (self.traces["boundary"], grid_state.U, grid_state.Q, self.density, b.normal, b.cell_L,
                 self.cell_material, *self.laws, (g.frame, g.velocity, g.values_at(time), g.copy), ctu,
-                self.topology["boundary"], (rec, state, self.cell_normals, self.boundary_local_face), flux, t_s,
+                self.topology["boundary"],
+                (rec, state, self.cell_normals, self.boundary_local_face, self._every_cell_recorded(state)), flux, t_s,
                 v_s, parts)
         bad = boundary_faces(*args)
         if bad >= 0:

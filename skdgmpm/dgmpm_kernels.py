@@ -494,21 +494,23 @@ def boundary_faces(T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, c
     the transverse corrections per unit Delta t of the fluctuation F_N(t*, v*) - F_N(t_L, v_L)
     entering the cell along its two edges adjacent to the face into parts (nf, 2, nc)
     (`boundary_corrections` adds them where they go). ``records`` = (rec, state, normals, local
-    face of each face in its cell) (`cell_records`, the state's): a face whose cell is recorded
-    reads its side there (as an interior face does), another gathers its trace and evaluates
-    the law's tangent (a face then costs about ten interior faces). Each face writes its own rows:
+    face of each face in its cell, recorded) (`cell_records`, the state's): a face whose cell is
+    recorded reads its side there (as an interior face does), another gathers its trace and
+    evaluates the law's tangent (a face then costs about ten interior faces); with ``recorded``
+    (every cell is, as `interior_pass` has it) that path is not compiled: a 2D kernel without it
+    compiles in half the time. Each face writes its own rows:
     chunks run in parallel, each of an eighth of `parallel.MIN_ROWS` faces at least. Returns the
     first face whose acoustic tensor, along the face or (CTU) an edge, is not positive definite,
     or -1."""
-    rec, state, normals, local = records
-    kernel = _boundary_faces(N.shape[1], normals.shape[1], only_law(laws))
+    rec, state, normals, local, recorded = records
+    kernel = _boundary_faces(N.shape[1], normals.shape[1], bool(recorded), only_law(laws))
     return parallel.chunked(len(N), kernel, "lh" + "w" * 17,
                             (T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, (rec, state, local),
                              flux, t_s, v_s, parts), "first", max(1, parallel.MIN_ROWS // 8))
 
 
 @kernel_factory
-def _boundary_faces(d, slots, only):
+def _boundary_faces(d, slots, every, only):    # every: every cell recorded, the trace path not compiled
     width = record_width(d, slots)
 
     def boundary_faces(lo, hi, T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, records, flux,
@@ -523,8 +525,8 @@ def _boundary_faces(d, slots, only):
             c = cell[f]
             for i in range(d):
                 n[i] = N[f, i]
-            recorded = state[c] != 0
-            if recorded:                    # the cell's record: its state, the impedance along this face
+            recorded = every or state[c] != 0
+            if every or recorded:           # the cell's record: its state, the impedance along this face
                 if not _copy_side(rec, state, c, local[f] % slots, q, Z, d):
                     return f - lo
                 if ctu:                     # and its split part, for the corrections
@@ -560,7 +562,7 @@ def _boundary_faces(d, slots, only):
                 add_normal_flux(t_L, v_L, n, -1.0, w, d)
                 h, edges = topo[0], topo[1]
                 scale = -1.0 / (2.0 * h[f])
-                if recorded:                # the record's impedances along the edges: the same numbers
+                if every or recorded:       # the record's impedances along the edges: the same numbers
                     _record_tangent(r, C, d, slots)
                     G_0, G_1 = _record_parts(w, C, r, scale, edges[0, f, 0], edges[0, f, 1], edges[1, f, 0],
                                              edges[1, f, 1], local[f], slots)

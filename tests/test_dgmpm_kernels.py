@@ -83,12 +83,15 @@ def test_boundary_pass_reads_a_recorded_cell_as_its_trace(transverse, uniform):
     """A boundary face whose cell is recorded takes its side (state, impedance, and for CTU the
     tangent and the edges' impedances) from the cell's record; the same face computed from its
     trace and the law's tangent (the record states set to 0: no cell recorded) gives the same
-    stationary states, fluxes and CTU corrections (an independent path through the law)."""
+    stationary states, fluxes and CTU corrections (an independent path through the law). With
+    every cell recorded ("all", as one particle per cell always has it) the pass is the kernel
+    compiled without the trace path."""
     st = _stepper(transverse)
     g = _random_state(st, uniform=UNIFORM[uniform](len(st.cell_dofs)))
     _, corr, corr_bnd = st.interface_flux(g)
     _, state = st._records()
     assert np.any(state[st.boundary.cell_L] == 1)          # some boundary faces read a record
+    assert st._every_cell_recorded(state) == (uniform == "all")
     made = {}
     for path in ("records", "traces"):
         if path == "traces":
