@@ -20,9 +20,8 @@ of the same kernels (debug information, bounds checks, another optimisation leve
 takes a suffix (kernels-<digest>-debug, ...: `build_tag`): numba's index keys a kernel on its
 signature and target, not on those flags, and would hand such a build to every later run.
 <base>: $NUMBA_CACHE_DIR if set, else $XDG_CACHE_HOME/skdgmpm or ~/.cache/skdgmpm; where it
-cannot be written, numba's own locators take over. Nothing global is
-set: numba's configuration is read, and written only for the time this package's own kernels
-compile (`Vectorise`).
+cannot be written, numba's own locators take over. Nothing global is set: numba's configuration
+is read, and written only for the time this package's own kernels compile (`Vectorise`).
 
 Straight-line SIMD
 ------------------
@@ -302,12 +301,12 @@ def scratch(shape):
 
 # ---------------------------------------------------------------- the first run's notice
 # CPU seconds to compile a scene's kernels from a cold cache, per method and dimension: on the
-# 2-core VM of docs/bench/session38.md, bar_elastic_1d 27-38 s (dgmpm), 44 s (ader-dgfem), 22 s
-# (mpm), plate_impact_neohookean_2d 77-83 s (dgmpm), standing_wave_2d 50 s (ader-dgfem), 28 s
-# (mpm); on the reference 2-core machine before, ader-dgmpm 2D (P = 3) 37 s; the others estimated
-# alike. The notice says the last one measured on this machine instead
+# 2-core VM of docs/bench/session38.md and session39.md, bar_elastic_1d 26-31 s (dgmpm), 44 s
+# (ader-dgfem), 22 s (mpm), plate_impact_neohookean_2d 52-63 s (dgmpm), standing_wave_2d 50 s
+# (ader-dgfem), 28 s (mpm); on the reference 2-core machine before, ader-dgmpm 2D (P = 3) 37 s;
+# the others estimated alike. The notice says the last one measured on this machine instead
 # (<base>/compile_seconds.json) where there is one.
-EXPECTED_S = {"dgmpm": {1: 35, 2: 80}, "mpm": {1: 25, 2: 30}, "rk-dgfem": {1: 35, 2: 40},
+EXPECTED_S = {"dgmpm": {1: 30, 2: 60}, "mpm": {1: 25, 2: 30}, "rk-dgfem": {1: 35, 2: 40},
               "ader-dgfem": {1: 45, 2: 50}, "ader-dgmpm": {1: 35, 2: 40}}
 
 
@@ -323,10 +322,13 @@ def _measured():
         return {}
 
 
+NOTICE = "compiling kernels for "       # the notice's first words (a reader of stderr can set it aside)
+
+
 class compile_notice(event.Listener):
     """A context manager around a run (re-enterable): within, the first time one of this
-    package's kernels is compiled (the cache lacks it), print "compiling kernels for <method>, <d>D
-    (first run, about N s; cached afterwards in <dir>)" on ``stream`` (stderr); nothing when every
+    package's kernels is compiled (the cache lacks it), print `NOTICE` "<method>, <d>D (first
+    run, about N s; cached afterwards in <dir>)" on ``stream`` (stderr); nothing when every
     kernel comes from the cache. ``seconds``: the CPU time spent compiling within, remembered as
     the next estimate for this method and dimension."""
 
@@ -360,7 +362,7 @@ class compile_notice(event.Listener):
             expected = _measured().get(self.what, self.expected)
             about = f"about {expected} s; " if expected else ""
             from tqdm import tqdm               # clears a progress bar on the stream, then redraws it
-            tqdm.write(f"compiling kernels for {self.what} (first run, {about}cached afterwards in {cache_dir()})",
+            tqdm.write(f"{NOTICE}{self.what} (first run, {about}cached afterwards in {cache_dir()})",
                        file=self.stream or sys.stderr)
 
     def on_end(self, ev):
