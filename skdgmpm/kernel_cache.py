@@ -94,7 +94,7 @@ from numba import njit, types
 from numba.core import cgutils, config, event
 from numba.core.caching import CacheImpl, _CacheLocator
 from numba.extending import intrinsic
-from numba.np.numpy_support import carray
+from numba.np.arrayobj import np_cfarray
 
 PACKAGE = __name__.rpartition(".")[0]           # "skdgmpm"
 SUBPACKAGES = ("materials", "forms")            # with kernels or inlined code (cases/: scenes, meshes)
@@ -276,37 +276,40 @@ SCRATCH_SIZE = 81       # entries of a `scratch` array: a (3, 3, 3, 3) tangent
 
 
 @intrinsic
-def _stack_doubles(typingctx):
-    """Pointer to SCRATCH_SIZE doubles on the stack of the compiled function being built."""
+def scratch(typingctx, shape):
+    """Uninitialised float array of ``shape`` (a tuple of ints, at most SCRATCH_SIZE entries) on
+    the stack of the compiled function that calls it, for the per-point scratch of the compiled
+    loops: unlike ``np.empty`` (heap memory the compiler must assume any other array may alias),
+    its entries stay in registers once the loops over it are unrolled (a literal d). It lives as
+    long as that function's call: never return it or keep it in another object. Written as
+    numba's code generation (the stack space, then ``carray``'s array over it), not as an
+    inlined function: a kernel calls it dozens of times, and numba's inlining of a function
+    translates and copies its body at every call (3.3 s of a 1D first run's 26 s)."""
+    if not (isinstance(shape, types.BaseTuple) and all(isinstance(s, types.Integer) for s in shape)):
+        raise numba.core.errors.TypingError(f"scratch: a tuple of ints expected, got {shape}")
+    array = types.Array(types.float64, len(shape), "C")
+
     def codegen(context, builder, signature, args):
-        return cgutils.alloca_once(builder, context.get_value_type(types.float64),
+        data = cgutils.alloca_once(builder, context.get_value_type(types.float64),
                                    size=ir.Constant(ir.IntType(64), SCRATCH_SIZE))
-    return types.CPointer(types.float64)(), codegen
-
-
-@njit(cache=True, inline="always")
-def scratch(shape):
-    """Uninitialised float array of ``shape`` (at most SCRATCH_SIZE entries) on the stack of the
-    compiled function that calls it, for the per-point scratch of the compiled loops: unlike
-    ``np.empty`` (heap memory the compiler must assume any other array may alias), its entries
-    stay in registers once the loops over it are unrolled (a literal d). It lives as long as that
-    function's call: never return it or keep it in another object."""
-    n = 1
-    for s in shape:
-        n *= s
-    if n > SCRATCH_SIZE:
-        raise ValueError("scratch: more than SCRATCH_SIZE entries")
-    return carray(_stack_doubles(), shape)
+        n = context.get_constant(types.intp, 1)
+        for size, kind in zip(cgutils.unpack_tuple(builder, args[0]), shape):
+            n = builder.mul(n, context.cast(builder, size, kind, types.intp))
+        with builder.if_then(builder.icmp_signed(">", n, context.get_constant(types.intp, SCRATCH_SIZE)),
+                             likely=False):
+            context.call_conv.return_user_exc(builder, ValueError, ("scratch: more than SCRATCH_SIZE entries",))
+        return np_cfarray(context, builder, array(types.CPointer(types.float64), shape), (data, args[0]))
+    return array(shape), codegen
 
 
 # ---------------------------------------------------------------- the first run's notice
 # CPU seconds to compile a scene's kernels from a cold cache, per method and dimension: on the
-# 2-core VM of docs/bench/session38.md and session39.md, bar_elastic_1d 26-31 s (dgmpm), 44 s
-# (ader-dgfem), 22 s (mpm), plate_impact_neohookean_2d 52-63 s (dgmpm), standing_wave_2d 50 s
+# 2-core VM of docs/bench/session38.md and session39.md, bar_elastic_1d 20-23 s (dgmpm), 44 s
+# (ader-dgfem), 22 s (mpm), plate_impact_neohookean_2d 47-57 s (dgmpm), standing_wave_2d 50 s
 # (ader-dgfem), 28 s (mpm); on the reference 2-core machine before, ader-dgmpm 2D (P = 3) 37 s;
 # the others estimated alike. The notice says the last one measured on this machine instead
 # (<base>/compile_seconds.json) where there is one.
-EXPECTED_S = {"dgmpm": {1: 30, 2: 60}, "mpm": {1: 25, 2: 30}, "rk-dgfem": {1: 35, 2: 40},
+EXPECTED_S = {"dgmpm": {1: 25, 2: 55}, "mpm": {1: 25, 2: 30}, "rk-dgfem": {1: 35, 2: 40},
               "ader-dgfem": {1: 45, 2: 50}, "ader-dgmpm": {1: 35, 2: 40}}
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numba
 import numpy as np
+import pytest
 
 import skdgmpm
 from skdgmpm import kernel_cache
@@ -264,3 +265,44 @@ def test_kernels_compiled_with_debug_information_are_filed_apart(tmp_path, monke
     assert hits_again == 1
     rows = cache_folders.folders(cache)
     assert sorted(Path(row[0]).name for row in rows) == sorted([Path(debug_dir).name, Path(plain_dir).name])
+
+
+def test_scratch_arrays_are_the_shapes_asked_for_and_apart():
+    """`scratch` (numba's code generation, not an inlined function): arrays of the shape asked for,
+    literal or read at run time, C-ordered, each its own memory (written in turn, each keeps its
+    own values); more than SCRATCH_SIZE entries raises; a shape that is not a tuple of ints is
+    refused when the caller is typed."""
+    from numba import njit
+    from numba.core.errors import TypingError
+    from skdgmpm.kernel_cache import SCRATCH_SIZE, scratch
+
+    @njit
+    def fill(x, n):
+        a, b, c = scratch((3, 3)), scratch((n,)), scratch((2, n, 2))
+        for i in range(3):
+            for j in range(3):
+                a[i, j] = x[i] + 10.0 * j
+        for i in range(n):
+            b[i] = -x[i]
+        c[:] = 7.0
+        return a.copy(), b.copy(), c.copy(), a.strides, c.strides
+
+    a, b, c, a_strides, c_strides = fill(np.arange(4.0), 4)
+    assert np.array_equal(a, np.arange(3.0)[:, None] + 10.0 * np.arange(3.0)[None, :])
+    assert np.array_equal(b, -np.arange(4.0)) and np.array_equal(c, np.full((2, 4, 2), 7.0))
+    assert a_strides == (24, 8) and c_strides == (64, 16, 8)
+
+    @njit
+    def square(n):
+        return scratch((n, n)).size
+
+    assert square(9) == SCRATCH_SIZE
+    with pytest.raises(ValueError, match="more than SCRATCH_SIZE"):
+        square(10)
+
+    @njit
+    def flat(n):
+        return scratch(n).size
+
+    with pytest.raises(TypingError, match="a tuple of ints"):
+        flat(3)
