@@ -135,13 +135,19 @@ def between(times, threads):
     return out
 
 
-def main():
+def rounds_parser():
+    """The command line of the scripts that step the bench plate on 1 and ``--threads`` threads in
+    turn (this one, step_replay.py)."""
     parser = argparse.ArgumentParser()
     parser.add_argument("--method", default="dgmpm-ctu")
     parser.add_argument("--size", type=int, default=256)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--rounds", type=int, default=40)
-    args = parser.parse_args()
+    return parser
+
+
+def main():
+    args = rounds_parser().parse_args()
     marks, sizes = [], collections.defaultdict(list)
     pass_gaps.timestamped(marks)
     switch = counted(sizes)

@@ -17,13 +17,18 @@ speed-up bounds what a driver could reach on this machine in these minutes. Prin
 and per-round speed-ups of each, and their difference round by round. Timings are measurements
 on the machine at hand, not test results.
 """
-import argparse
+import importlib.util
 import time
+from pathlib import Path
 
 import numpy as np
 
 from skdgmpm import bench, parallel
 from skdgmpm.build import build
+
+_spec = importlib.util.spec_from_file_location("pass_scaling", Path(__file__).with_name("pass_scaling.py"))
+pass_scaling = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(pass_scaling)
 
 
 class Replay:
@@ -125,12 +130,7 @@ def measure(method, n, threads, rounds, warmup=3):
 
 
 def main():
-    parser = argparse.ArgumentParser()
-    parser.add_argument("--method", default="dgmpm-ctu")
-    parser.add_argument("--size", type=int, default=256)
-    parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--rounds", type=int, default=40)
-    args = parser.parse_args()
+    args = pass_scaling.rounds_parser().parse_args()
     t = args.threads
     times, names, stopped = measure(args.method, args.size, t, args.rounds)
     print(f"{args.method} {args.size}^2, the step and its passes back to back ({', '.join(names)}), "
