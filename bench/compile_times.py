@@ -1,6 +1,6 @@
 """What a scene's first run compiles, and for how long (docs/bench/session38.md).
 
-    python bench/compile_times.py SCENE [--set KEY=VALUE ...] [--top 15]
+    python bench/compile_times.py SCENE [--set KEY=VALUE ...] [--top 15] [--passes N]
 
 Runs ``skdgmpm run SCENE`` in this process on an empty kernel cache (a temporary
 NUMBA_CACHE_DIR, removed afterwards: the user's cache is neither read nor filled), every
@@ -59,6 +59,17 @@ def split(function):
     return timers.get("compiler_lock", float("nan")) - llvm, llvm
 
 
+def passes(function):
+    """numba's compiler passes of a compiled function's first signature, slowest first:
+    [(pass name, seconds)] (its ``pipeline_times``)."""
+    for result in function.overloads.values():
+        times = (result.metadata or {}).get("pipeline_times", {})
+        runs = [(p.split("_", 1)[1], t.init + t.run + t.finalize) for pipeline in times.values()
+                for p, t in pipeline.items()]
+        return sorted(runs, key=lambda r: -r[1])
+    return []
+
+
 def name(function):
     """A kernel's readable name: module and qualified name, a factory's variant tag kept."""
     return f"{function.py_func.__module__}.{function.py_func.__qualname__.replace('.<locals>.', ':')}"
@@ -69,6 +80,8 @@ def main():
     parser.add_argument("scene")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     parser.add_argument("--top", type=int, default=15)
+    parser.add_argument("--passes", type=int, default=0, metavar="N",
+                        help="numba's slowest compiler passes of each of the N slowest kernels")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as work:
         config.CACHE_DIR = os.path.join(work, "cache")      # before the package's kernels are made
@@ -86,6 +99,8 @@ def main():
     for seconds, _, function, _ in top[:args.top]:
         front, llvm = split(function)
         print(f"{seconds:7.2f} {front:6.2f} {llvm:6.2f}  {name(function)}")
+    for _, _, function, _ in top[:args.passes]:
+        print(f"{name(function)}: " + ", ".join(f"{p} {s:.2f}" for p, s in passes(function)[:6]))
     inner = collections.Counter(name(function) for _, depth, function, _ in records if depth > 0)
     print("compiled most often inside them: " + ", ".join(f"{n} x{k}" for n, k in inner.most_common(5)))
     return status

@@ -100,6 +100,9 @@ class DGMPM(GodunovScheme):
         self.d = g.dim
         n_cells = g.submesh.nelements
         self.cellwise = self._cellwise()
+        # whether a face pass may meet a cell whose nodes differ (not recorded): then its one kernel
+        # has the trace path from the first step on, whether that step's cells are all recorded or not
+        self.trace_path = not self.cellwise
         self._records_of = None                 # (U, Q) of the state whose cell records are kept: `_records`
         if self.cellwise:       # the particles' own arrays are the grid state: no operators kept
             self.n_dofs = n_cells * len(g.element.doflocs)
@@ -192,7 +195,7 @@ class DGMPM(GodunovScheme):
 
     def _every_cell_recorded(self, state):
         """Whether every cell of the records' ``state`` is recorded (always with one particle per
-        cell): the face passes then read no trace, and are compiled without that path."""
+        cell): the face passes then read no trace (CTU: the cells split the fluctuations)."""
         return self.cellwise or bool(np.all(state != 0))
 
     # ---------------------------------------------------------------- set-up
@@ -330,8 +333,8 @@ class DGMPM(GodunovScheme):
             n_L = n_R = np.zeros((0, 2, 2))
 
         bad = interior_pass(T_L, T_R, grid_state.U, grid_state.Q, rho, f.normal, f.cell_L, f.cell_R,
-                            self.cell_material, *laws, (rec, state, normals, k_L, k_R, recorded), ctu, (h_L, n_L),
-                            (h_R, n_R), flux, G)
+                            self.cell_material, *laws, (rec, state, normals, k_L, k_R, recorded, self.trace_path), ctu,
+                            (h_L, n_L), (h_R, n_R), flux, G)
         if bad >= 0:
             _not_hyperbolic(bad)
         if ctu and recorded:
@@ -364,8 +367,7 @@ class DGMPM(GodunovScheme):
         args = (self.traces["boundary"], grid_state.U, grid_state.Q, self.density, b.normal, b.cell_L,
                 self.cell_material, *self.laws, (g.frame, g.velocity, g.values_at(time), g.copy), ctu,
                 self.topology["boundary"],
-                (rec, state, self.cell_normals, self.boundary_local_face, self._every_cell_recorded(state)), flux, t_s,
-                v_s, parts)
+                (rec, state, self.cell_normals, self.boundary_local_face, self.trace_path), flux, t_s, v_s, parts)
         bad = boundary_faces(*args)
         if bad >= 0:
             _not_hyperbolic(bad)

@@ -303,26 +303,29 @@ def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, p
     transverse parts per unit Delta t of both sides' fluctuations into G (nf, 4, nc): side L's
     for its cell's two edges in G[:, 0:2], side R's in G[:, 2:4] (summed on the edges by a row
     gather, `parallel.matmul`: each face writes its own rows only). ``records`` = (rec,
-    state, normals, local face of each face in cell L, in cell R, recorded) (`cell_records`): a
-    side whose cell is recorded reads its record, another computes its trace's record; with
-    ``recorded`` (every cell is) the trace path is not compiled, and CTU writes the two
-    fluctuations into G (nf, 2, nc) instead, for `cell_corrections`. G and the topologies are
-    empty without CTU. The faces in chunks on the threads (`parallel.chunked`). Returns the first
-    face whose acoustic tensor is not positive definite, or -1."""
-    rec, state, normals, k_L, k_R, recorded = records
-    kernel = _interior_pass(N.shape[1], normals.shape[1], bool(recorded), only_law(laws))
-    return parallel.chunked(len(N), kernel, "ccwwwrrrwwwwwwrrw(rr)(rr)rr",
+    state, normals, local face of each face in cell L, in cell R, recorded, traces)
+    (`cell_records`): a side whose cell is recorded reads its record, another computes its
+    trace's record. With ``recorded`` (every cell is) CTU writes the two fluctuations into G (nf,
+    2, nc) instead, for `cell_corrections`. ``traces``: whether a cell may be unrecorded (any
+    layout but one particle per cell); without, the trace path is not compiled. One kernel serves
+    a grid's every state, recorded or not: a run compiles it in its first step. G and the
+    topologies are empty without CTU. The faces in chunks on the threads (`parallel.chunked`).
+    Returns the first face whose acoustic tensor is not positive definite, or -1."""
+    rec, state, normals, k_L, k_R, recorded, traces = records
+    kernel = _interior_pass(N.shape[1], normals.shape[1], bool(traces), only_law(laws))
+    return parallel.chunked(len(N), kernel, "ccwwwrrrwwwwwwrrww(rr)(rr)rr",
                             (parallel.csr(T_L), parallel.csr(T_R), U, Q, rho, N, cell_L, cell_R, cell_material, laws,
-                             params, rec, state, normals, k_L, k_R, ctu, topo_L, topo_R, flux, G), "first")
+                             params, rec, state, normals, k_L, k_R, bool(recorded), ctu, topo_L, topo_R, flux, G),
+                            "first")
 
 
 @kernel_factory
-def _interior_pass(d, slots, recorded, only):  # literals: the loops unrolled, the trace path compiled only if needed
+def _interior_pass(d, slots, traces, only):  # literals: the loops unrolled, the trace path compiled only if needed
     nc, dd = d * d + d, d * d
     width = record_width(d, slots)
 
     def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params, rec, state, normals,
-                      k_L, k_R, ctu, topo_L, topo_R, flux, G):
+                      k_L, k_R, recorded, ctu, topo_L, topo_R, flux, G):
         s_L, s_R, w_L, w_R = scratch((width,)), scratch((width,)), scratch((nc,)), scratch((nc,))
         q_L, q_R, F_L, F_R = scratch((nc,)), scratch((nc,)), scratch((3, 3)), scratch((3, 3))
         C_L, C_R, Z_L, Z_R = scratch((d, d, d, d)), scratch((d, d, d, d)), scratch((d, d)), scratch((d, d))
@@ -330,13 +333,17 @@ def _interior_pass(d, slots, recorded, only):  # literals: the loops unrolled, t
         n, v_L, v_R, o = scratch((d,)), scratch((d,)), scratch((d,)), scratch((nc,))
         for f in range(len(N)):
             c_L, c_R = cell_L[f], cell_R[f]
-            if recorded:                        # every cell recorded: no trace read, no tangent needed
-                ok_L = _copy_side(rec, state, c_L, k_L[f] % slots, s_L, Z_L, d)
-                ok_R = _copy_side(rec, state, c_R, k_R[f] % slots, s_R, Z_R, d)
-            else:
+            if traces:                          # each side's work in a loop over the sides: inlined once, not twice
                 trace_L, trace_R = state[c_L] == 0, state[c_R] == 0     # the nodes differ: the trace's record
-                rho_L = _gather(T_L, f, U, Q, rho, q_L, F_L, d) if trace_L else 1.0
-                rho_R = _gather(T_R, f, U, Q, rho, q_R, F_R, d) if trace_R else 1.0
+                rho_L = rho_R = 1.0
+                for side in range(2):
+                    T, q, F, trace = (T_L, q_L, F_L, trace_L) if side == 0 else (T_R, q_R, F_R, trace_R)
+                    if trace:
+                        rho_s = _gather(T, f, U, Q, rho, q, F, d)
+                        if side == 0:
+                            rho_L = rho_s
+                        else:
+                            rho_R = rho_s
                 m_L, m_R = cell_material[c_L], cell_material[c_R]
                 if d == 1:                          # the law called, not inlined (`points.tangent_call`)
                     if trace_L:
@@ -347,18 +354,23 @@ def _interior_pass(d, slots, recorded, only):  # literals: the loops unrolled, t
                     identity_if_not(trace_L, F_L)
                     identity_if_not(trace_R, F_R)
                     tangent_points(laws, params, m_L, m_R, only, F_L, F_R, C_L, C_R, d)
-                if trace_L:                         # a view: rare path
-                    ok_L = fill_record(q_L, rho_L, C_L, normals[c_L], s_L, d, slots, ctu)
-                else:
-                    _copy_record(rec, c_L, s_L, d, slots, ctu)
-                    ok_L = state[c_L] == 1
-                if trace_R:
-                    ok_R = fill_record(q_R, rho_R, C_R, normals[c_R], s_R, d, slots, ctu)
-                else:
-                    _copy_record(rec, c_R, s_R, d, slots, ctu)
-                    ok_R = state[c_R] == 1
-                _record_impedance(s_L, k_L[f] % slots, Z_L, d)
-                _record_impedance(s_R, k_R[f] % slots, Z_R, d)
+                ok_L = ok_R = True
+                for side in range(2):
+                    c, q, C, s, Z, k = ((c_L, q_L, C_L, s_L, Z_L, k_L[f]) if side == 0
+                                        else (c_R, q_R, C_R, s_R, Z_R, k_R[f]))
+                    if state[c] == 0:               # a view: rare path
+                        ok = fill_record(q, rho_L if side == 0 else rho_R, C, normals[c], s, d, slots, ctu)
+                    else:
+                        _copy_record(rec, c, s, d, slots, ctu)
+                        ok = state[c] == 1
+                    _record_impedance(s, k % slots, Z, d)
+                    if side == 0:
+                        ok_L = ok
+                    else:
+                        ok_R = ok
+            else:                               # every cell recorded: no trace read, no tangent needed
+                ok_L = _copy_side(rec, state, c_L, k_L[f] % slots, s_L, Z_L, d)
+                ok_R = _copy_side(rec, state, c_R, k_R[f] % slots, s_R, Z_R, d)
             if not (ok_L and ok_R):
                 return f
             for i in range(d):              # rows copied, not viewed (views are reference counted)
@@ -371,16 +383,17 @@ def _interior_pass(d, slots, recorded, only):  # literals: the loops unrolled, t
             add_normal_flux(t_s, v_s, n, 1.0, o, d)
             for k in range(nc):
                 flux[f, k] = o[k]
-            if d == 2 and ctu and recorded:     # the fluctuations kept: each cell splits those entering it
+            if d == 2 and ctu:                  # fluctuations A- dQ into L, A+ dQ into R
                 fluctuations(s_L, s_R, n, t_L, t_R, o, w_L, w_R, d)
-                for k in range(nc):
-                    G[f, 0, k], G[f, 1, k] = w_L[k], w_R[k]
-            elif d == 2 and ctu:            # fluctuations A- dQ into L, A+ dQ into R, split at once
-                fluctuations(s_L, s_R, n, t_L, t_R, o, w_L, w_R, d)
-                _record_tangent(s_L, C_L, d, slots)
-                _record_tangent(s_R, C_R, d, slots)
-                _split_into(w_L, C_L, s_L, k_L[f], topo_L, f, G, 0, slots)
-                _split_into(w_R, C_R, s_R, k_R[f], topo_R, f, G, 2, slots)
+                if traces and not recorded:     # split at once
+                    for side in range(2):
+                        w, C, s, k, topo = ((w_L, C_L, s_L, k_L[f], topo_L) if side == 0
+                                            else (w_R, C_R, s_R, k_R[f], topo_R))
+                        _record_tangent(s, C, d, slots)
+                        _split_into(w, C, s, k, topo, f, G, 2 * side, slots)
+                else:                           # kept: each cell splits those entering it
+                    for k in range(nc):
+                        G[f, 0, k], G[f, 1, k] = w_L[k], w_R[k]
         return -1
     return interior_pass
 
@@ -494,24 +507,24 @@ def boundary_faces(T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, c
     the transverse corrections per unit Delta t of the fluctuation F_N(t*, v*) - F_N(t_L, v_L)
     entering the cell along its two edges adjacent to the face into parts (nf, 2, nc)
     (`boundary_corrections` adds them where they go). ``records`` = (rec, state, normals, local
-    face of each face in its cell, recorded) (`cell_records`, the state's): a face whose cell is
+    face of each face in its cell, traces) (`cell_records`, the state's): a face whose cell is
     recorded reads its side there (as an interior face does), another gathers its trace and
-    evaluates the law's tangent (a face then costs about ten interior faces); with ``recorded``
-    (every cell is, as `interior_pass` has it) that path is not compiled: a 2D kernel without it
-    compiles in half the time. Each face writes its own rows:
+    evaluates the law's tangent (a face then costs about ten interior faces); without ``traces``
+    (every cell always recorded, as `interior_pass` has it) that path is not compiled: a 2D
+    kernel without it compiles in a third of the time. Each face writes its own rows:
     chunks run in parallel, each of an eighth of `parallel.MIN_ROWS` faces at least. Returns the
     first face whose acoustic tensor, along the face or (CTU) an edge, is not positive definite,
     or -1."""
-    rec, state, normals, local, recorded = records
-    kernel = _boundary_faces(N.shape[1], normals.shape[1], bool(recorded), only_law(laws))
+    rec, state, normals, local, traces = records
+    kernel = _boundary_faces(N.shape[1], normals.shape[1], bool(traces), only_law(laws))
     return parallel.chunked(len(N), kernel, "lh" + "w" * 17,
                             (T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, (rec, state, local),
                              flux, t_s, v_s, parts), "first", max(1, parallel.MIN_ROWS // 8))
 
 
 @kernel_factory
-def _boundary_faces(d, slots, every, only):    # every: every cell recorded, the trace path not compiled
-    width = record_width(d, slots)
+def _boundary_faces(d, slots, traces, only):   # without traces the trace path is not compiled
+    width, every = record_width(d, slots), not traces       # every: every cell recorded
 
     def boundary_faces(lo, hi, T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, records, flux,
                        t_s, v_s, parts):
@@ -525,7 +538,7 @@ def _boundary_faces(d, slots, every, only):    # every: every cell recorded, the
             c = cell[f]
             for i in range(d):
                 n[i] = N[f, i]
-            recorded = every or state[c] != 0
+            recorded = state[c] != 0
             if every or recorded:           # the cell's record: its state, the impedance along this face
                 if not _copy_side(rec, state, c, local[f] % slots, q, Z, d):
                     return f - lo

@@ -47,14 +47,25 @@ def _random_state(st, seed=0, uniform=None):
 
 
 UNIFORM = {"none": lambda n: None, "all": lambda n: np.ones(n, bool), "half": lambda n: np.arange(n) % 2 == 0}
+# every cell recorded, read by the kernel with the trace path (a nodal layout's) and by the one
+# without it (one particle per cell's: `DGMPM.trace_path` False)
+CASES = [*UNIFORM, "all, no trace path"]
 
 
-@pytest.mark.parametrize("uniform", UNIFORM)
+def _case(st, case):
+    """The grid state of a test case (`CASES`), the stepper set as the case says."""
+    uniform = case.split(",")[0]
+    st.trace_path = not case.endswith("no trace path")
+    return _random_state(st, uniform=UNIFORM[uniform](len(st.cell_dofs)))
+
+
+@pytest.mark.parametrize("case", CASES)
 @pytest.mark.parametrize("transverse", ["dcu", "ctu"])
-def test_interior_pass_matches_batched_path(transverse, uniform):
-    """Both paths of a face side (the cell's record, the trace's record), alone and mixed."""
+def test_interior_pass_matches_batched_path(transverse, case):
+    """Both paths of a face side (the cell's record, the trace's record), alone and mixed, and a
+    grid of recorded cells through the kernel compiled without the trace path."""
     st = _stepper(transverse)
-    g = _random_state(st, uniform=UNIFORM[uniform](len(st.cell_dofs)))
+    g = _case(st, case)
     f, d, dt = st.interior, st.d, 1e-7
     flux, corr, corr_bnd = st.interface_flux(g)
     flux, corr_bnd = flux + dt * face_corrections(corr), dt * corr_bnd
@@ -77,31 +88,53 @@ def test_interior_pass_matches_batched_path(transverse, uniform):
     assert np.all(np.abs(corr_bnd - ref_bnd) <= 1e-12 * np.abs(ref).max())
 
 
-@pytest.mark.parametrize("uniform", ["all", "half"])
+@pytest.mark.parametrize("case", CASES[1:])
 @pytest.mark.parametrize("transverse", ["dcu", "ctu"])
-def test_boundary_pass_reads_a_recorded_cell_as_its_trace(transverse, uniform):
+def test_boundary_pass_reads_a_recorded_cell_as_its_trace(transverse, case):
     """A boundary face whose cell is recorded takes its side (state, impedance, and for CTU the
     tangent and the edges' impedances) from the cell's record; the same face computed from its
     trace and the law's tangent (the record states set to 0: no cell recorded) gives the same
     stationary states, fluxes and CTU corrections (an independent path through the law). With
-    every cell recorded ("all", as one particle per cell always has it) the pass is the kernel
-    compiled without the trace path."""
+    every cell recorded, the kernel with the trace path and the one without it (one particle per
+    cell's) both."""
     st = _stepper(transverse)
-    g = _random_state(st, uniform=UNIFORM[uniform](len(st.cell_dofs)))
+    g = _case(st, case)
     _, corr, corr_bnd = st.interface_flux(g)
     _, state = st._records()
     assert np.any(state[st.boundary.cell_L] == 1)          # some boundary faces read a record
-    assert st._every_cell_recorded(state) == (uniform == "all")
+    assert st._every_cell_recorded(state) == case.startswith("all")
     made = {}
     for path in ("records", "traces"):
         if path == "traces":
             state[:] = 0
+            st.trace_path = True
         c, c_bnd = corr.copy(), corr_bnd.copy()
         made[path] = (*st.boundary_flux(g, 1e-6, c, c_bnd), c, c_bnd)
     for mine, ref in zip(made["records"], made["traces"]):
         assert mine.shape == ref.shape
         if ref.size:                    # DCU: no interior corrections
             assert np.all(np.abs(mine - ref) <= 1e-12 * np.abs(ref).max())
+
+
+def test_a_nodal_run_steps_on_one_kernel_of_each_face_pass(monkeypatch):
+    """Two particles per cell: the first step's cells are all recorded (a uniform initial state),
+    later ones' are not. Both face passes take the kernel with the trace path from the first step
+    on (one kernel each, compiled within the start-up that the run reports apart), not one kernel
+    for the first steps and another, compiled inside the timed loop, once a cell is not recorded."""
+    from skdgmpm import dgmpm_kernels
+    asked = {"_interior_pass": set(), "_boundary_faces": set()}
+    for name in asked:
+        def recording(*sizes, factory=getattr(dgmpm_kernels, name), name=name):
+            asked[name].add(sizes[2])               # the literal: the trace path compiled
+            return factory(*sizes)
+        monkeypatch.setattr(dgmpm_kernels, name, recording)
+    built = build(load_scene("bar_elastic_1d", ["particles.per_cell=2", "method.cfl=0.5"]))
+    stepper, state, recorded = built.stepper, built.initial, []
+    for _ in range(30):
+        state = stepper.step(state)
+        recorded.append(stepper._every_cell_recorded(stepper._records()[1]))
+    assert recorded[0] and not all(recorded)
+    assert asked == {"_interior_pass": {True}, "_boundary_faces": {True}}
 
 
 def test_a_recorded_cell_that_is_not_hyperbolic_stops_the_pass_at_its_first_face():
