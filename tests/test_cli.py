@@ -256,6 +256,27 @@ def test_wall_time_leaves_out_the_start_up(monkeypatch, tmp_path):
     assert summary["wall_per_step_s"] == 1.0
 
 
+def test_a_kernel_compiled_inside_the_loop_counts_in_the_start_up(monkeypatch, tmp_path):
+    """A kernel that compiles after the first step (a path that step did not take: 5 s of this
+    clock in numba's compile event, at step 3) is start-up, not step time: wall_s stays the
+    steps' own seconds."""
+    from numba.core import event
+    clock = VirtualClock(monkeypatch)
+
+    def compile_at_step_3(state, disc):
+        if state.step == 3:
+            with event.trigger_event("numba:compile", data={}):
+                with event.trigger_event("numba:compile", data={}):     # one compiled inside it
+                    clock.now += 5.0
+
+    run("bar_elastic_1d", ["grid.cells=20", "run.t_end=3e-4"], out=tmp_path / "o", progress=False,
+        on_step=compile_at_step_3)
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    steps = summary["steps"]
+    assert steps > 3 and clock.now == 15.0 + (steps - 1)
+    assert summary["startup_s"] == 15.0 and summary["wall_s"] == steps - 1
+
+
 def test_a_study_times_its_runs_without_start_up(monkeypatch):
     """Every run of a study pays its own start-up (a fresh stepper, cold in this clock): the rows
     carry it in startup_s and wall_s is the warm step time times the steps."""
