@@ -71,7 +71,32 @@ def stress_update_point(F, prm, h_n, h, P, d):
     """Return mapping at one embedded F (3, 3) of t_{n+1}: d-block P (d, d) of P = tau F^-T and
     the history h (7,) from that of t_n, h_n (7,) = (eqp, Cp^-1 11, 22, 33, 12, 13, 23) (read before
     h is written, so the two may be one array); prm = (mu, lam, sigma_y, H). Where det F <= 0, P is
-    that of F = I with the virgin state (zero) and the history stays h_n (never NaN)."""
+    that of F = I with the virgin state (zero) and the history stays h_n (never NaN).
+
+    The law's code is called (`_return_mapping`), not inlined: inlined through the law table's
+    overload (`points.stress_update_point`, built up to three times per kernel) its IR, with the
+    Jacobi sweeps, was copied so often that each kernel took 30-40 s to type (docs/bench/session40.md
+    §5); called, it compiles once for every kernel. The arrays go through stack copies, so that
+    the caller's own do not escape into the call (`points.tangent_call`)."""
+    F_c, prm_c, h_n_c, h_c, P_c = scratch((3, 3)), scratch((4,)), scratch((7,)), scratch((7,)), scratch((d, d))
+    for i in range(3):
+        for a in range(3):
+            F_c[i, a] = F[i, a]
+    for k in range(4):
+        prm_c[k] = prm[k]
+    for k in range(7):
+        h_n_c[k] = h_n[k]
+    _return_mapping(F_c, prm_c, h_n_c, h_c, P_c, d)
+    for k in range(7):
+        h[k] = h_c[k]
+    for i in range(d):
+        for a in range(d):
+            P[i, a] = P_c[i, a]
+
+
+@njit(cache=True)
+def _return_mapping(F, prm, h_n, h, P, d):
+    """`stress_update_point`'s body, compiled on its own."""
     mu, lam, sigma_y, H = prm[0], prm[1], prm[2], prm[3]
     ok, _, G = _inverse_transpose(F)
     for k in range(7):
