@@ -14,8 +14,6 @@ import argparse
 import os
 import sys
 import tempfile
-import threading
-import time
 from pathlib import Path
 
 from numba.core import config, event
@@ -23,25 +21,20 @@ from numba.core import config, event
 CASES = Path(__file__).resolve().parent.parent / "cases"
 
 
-class Compiles(event.Listener):
-    """This thread's outermost compilations: [(step, seconds, function name)], ``step`` set by
-    the caller (0: the build and the initial state; k: the k-th step)."""
+def compiles_by_step():
+    """A `CompileClock` that keeps each outermost compilation as (step, seconds, function name) in
+    ``found``, ``step`` set by the caller (0: the build and the initial state; k: the k-th step)."""
+    from skdgmpm.run import CompileClock
 
-    def __init__(self):
-        self.step, self.depth, self.start, self.found = 0, 0, 0.0, []
-        self.thread = threading.get_ident()
+    class Compiles(CompileClock):
+        def __init__(self):
+            super().__init__()
+            self.step, self.found = 0, []
 
-    def on_start(self, ev):
-        if threading.get_ident() == self.thread:
-            self.depth += 1
-            if self.depth == 1:
-                self.start, self.name = time.perf_counter(), ev.data["dispatcher"].py_func.__qualname__
+        def compiled(self, seconds, ev):
+            self.found.append((self.step, seconds, ev.data["dispatcher"].py_func.__qualname__))
 
-    def on_end(self, ev):
-        if threading.get_ident() == self.thread:
-            self.depth -= 1
-            if self.depth == 0:
-                self.found.append((self.step, time.perf_counter() - self.start, self.name))
+    return Compiles()
 
 
 def main():
@@ -56,7 +49,7 @@ def main():
         from skdgmpm.run import run
         print(f"{'scene':32} {'first s':>8} {'later s':>8}  compiled after the first step")
         for scene in scenes:
-            compiles = Compiles()
+            compiles = compiles_by_step()
 
             def on_step(state, disc):               # called with the initial state, then after each step
                 compiles.step = state.step + 1          # the step about to run

@@ -300,7 +300,7 @@ def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, progress, 
     first step, which compiles the kernels or loads them from numba's cache; ``wall_s`` is the
     rest of the loop, so timings compare methods and grids whatever the state of the cache. A
     kernel compiled inside the loop (a path the first step did not take) counts in the start-up
-    too, not in ``wall_s`` (`_CompileClock`)."""
+    too, not in ``wall_s`` (`CompileClock`)."""
     writer = None if out is None else outdir.RunWriter(out, stepper, fields)
     if saved is None:
         history = {k: [] for k in HISTORY}
@@ -359,7 +359,7 @@ def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, progress, 
     bar = _progress(t_end, scene.name, progress)
     if saved is not None:
         bar.update(state.t)
-    start, warm, compiling = time.perf_counter(), None, _CompileClock()
+    start, warm, compiling = time.perf_counter(), None, CompileClock()
 
     def timing(now):
         w = now if warm is None else warm
@@ -441,10 +441,11 @@ def _run(scene, disc, solution, stepper, state, t_end, n_frames, out, progress, 
     return result
 
 
-class _CompileClock(event.Listener):
+class CompileClock(event.Listener):
     """Wall seconds this thread spends compiling (numba's outermost "numba:compile" events; a
     kernel loaded from the cache is not one) while installed: `_run` moves those of the timed
-    loop into the start-up."""
+    loop into the start-up. Each outermost compilation goes to `compiled` (bench/late_compiles.py
+    records them by step)."""
 
     def __init__(self):
         self.seconds, self.depth, self.start, self.thread = 0.0, 0, 0.0, threading.get_ident()
@@ -453,13 +454,17 @@ class _CompileClock(event.Listener):
         if threading.get_ident() == self.thread:
             self.depth += 1
             if self.depth == 1:
-                self.start = time.perf_counter()
+                self.start, self.event = time.perf_counter(), ev
 
     def on_end(self, ev):
         if threading.get_ident() == self.thread:
             self.depth -= 1
             if self.depth == 0:
-                self.seconds += time.perf_counter() - self.start
+                self.compiled(time.perf_counter() - self.start, self.event)
+
+    def compiled(self, seconds, ev):
+        """One outermost compilation of ``seconds``; ``ev``: the event that began it."""
+        self.seconds += seconds
 
 
 def _plots(result, folder, atomic=None):
