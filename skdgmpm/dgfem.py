@@ -23,7 +23,7 @@ from . import forms, integrators, parallel, system
 from .elements import ElementLineLagrange
 from .errors import InputError
 from .faces import interior_faces
-from .kernel_cache import kernel_factory
+from .kernel_cache import kernel_factory, scratch
 from .limiter import SlopeLimiter
 from .particles import Particles
 from .riemann import trace_fluxes
@@ -48,12 +48,29 @@ def _apply_blocks(blocks, cell_dofs, R, out, R2=None, base=None, step=1.0):
 
 @kernel_factory
 def _apply_blocks_kernel(nb, nc, two, update):      # two, update: 0 or 1 (R2 added, base + step * ...)
-    if nb is None:                      # sizes read at run time
+    if nb is None:                      # sizes read at run time (1D; P >= 3, whose rows outgrow the scratch)
         def apply_blocks(blocks, cell_dofs, R, R2, base, step, out):
             _apply_blocks_n(blocks, cell_dofs, R, R2, base, step, out, blocks.shape[1], R.shape[1], two, update)
-    else:
-        def apply_blocks(blocks, cell_dofs, R, R2, base, step, out):
-            _apply_blocks_n(blocks, cell_dofs, R, R2, base, step, out, nb, nc, two, update)
+        return apply_blocks
+
+    def apply_blocks(blocks, cell_dofs, R, R2, base, step, out):
+        """Each cell's rows of R (+ R2) gathered into stack scratch before its rows of ``out`` are
+        written: the compiler cannot tell ``out`` from the arrays it reads and, reading them in
+        place, loads them again after every store (the pass x3-4 slower on one thread, where
+        `parallel.chunked` calls it from Python). The same operations in the same order."""
+        x = scratch((nb, nc))
+        for c in range(len(blocks)):
+            for m in range(nb):
+                r = cell_dofs[c, m]
+                for j in range(nc):
+                    x[m, j] = (R[r, j] + R2[r, j]) if two else R[r, j]
+            for k in range(nb):
+                i = cell_dofs[c, k]
+                for j in range(nc):
+                    s = 0.0
+                    for m in range(nb):
+                        s += blocks[c, k, m] * x[m, j]
+                    out[i, j] = base[i, j] + step * s if update else s
     return apply_blocks
 
 

@@ -58,3 +58,30 @@ def test_bars_run_stably_for_every_order(scene, order):
     growth = np.diff(r.history["balance"]).max()
     assert growth <= 1e-9 * r.history["external_work"].max()
     assert r.errors["P11"]["L1_rel"] < 0.1
+
+
+@pytest.mark.parametrize("nb, nc", [(4, 6), (9, 6), (16, 6), (3, 2)])   # Q1, Q2 (literal sizes), Q3 and 1D P2 (read at run time)
+@pytest.mark.parametrize("two, update", [(False, False), (True, True)])
+def test_mass_blocks_give_the_bits_of_the_row_by_row_sum(nb, nc, two, update):
+    """`_apply_blocks` (M^-1 R cell by cell; with R2 and base an explicit stage's update in the same
+    pass) against the sum written out in Python, term by term in the same order: the same bits.
+    The cells' dofs are shuffled, so that a kernel that wrote a cell's rows of ``out`` before it
+    had read them all, or read another cell's, would differ."""
+    from skdgmpm.dgfem import _apply_blocks
+    rng = np.random.default_rng(nb * nc)
+    n_cells = 7
+    blocks = rng.standard_normal((n_cells, nb, nb))
+    cell_dofs = rng.permutation(n_cells * nb).astype(np.int32).reshape(n_cells, nb)
+    R, R2, base = (rng.standard_normal((n_cells * nb, nc)) for _ in range(3))
+    out = np.full_like(R, np.nan)
+    _apply_blocks(blocks, cell_dofs, R, out, R2 if two else None, base if update else None, 0.3)
+    expected = np.empty_like(R)
+    for c in range(n_cells):
+        for k in range(nb):
+            for j in range(nc):
+                s = 0.0
+                for m in range(nb):
+                    r = cell_dofs[c, m]
+                    s += float(blocks[c, k, m]) * (float(R[r, j] + R2[r, j]) if two else float(R[r, j]))
+                expected[cell_dofs[c, k], j] = float(base[cell_dofs[c, k], j]) + 0.3 * s if update else s
+    assert np.array_equal(out, expected)
