@@ -331,19 +331,14 @@ def _interior_pass(d, slots, traces, only):  # literals: the loops unrolled, the
         C_L, C_R, Z_L, Z_R = scratch((d, d, d, d)), scratch((d, d, d, d)), scratch((d, d)), scratch((d, d))
         t_L, t_R, t_s, v_s = scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,))
         n, v_L, v_R, o = scratch((d,)), scratch((d,)), scratch((d,)), scratch((nc,))
+        rho_f = scratch((2,))                # each side's trace's density
         for f in range(len(N)):
             c_L, c_R = cell_L[f], cell_R[f]
             if traces:                          # each side's work in a loop over the sides: inlined once, not twice
                 trace_L, trace_R = state[c_L] == 0, state[c_R] == 0     # the nodes differ: the trace's record
-                rho_L = rho_R = 1.0
                 for side in range(2):
                     T, q, F, trace = (T_L, q_L, F_L, trace_L) if side == 0 else (T_R, q_R, F_R, trace_R)
-                    if trace:
-                        rho_s = _gather(T, f, U, Q, rho, q, F, d)
-                        if side == 0:
-                            rho_L = rho_s
-                        else:
-                            rho_R = rho_s
+                    rho_f[side] = _gather(T, f, U, Q, rho, q, F, d) if trace else 1.0
                 m_L, m_R = cell_material[c_L], cell_material[c_R]
                 if d == 1:                          # the law called, not inlined (`points.tangent_call`)
                     if trace_L:
@@ -354,24 +349,20 @@ def _interior_pass(d, slots, traces, only):  # literals: the loops unrolled, the
                     identity_if_not(trace_L, F_L)
                     identity_if_not(trace_R, F_R)
                     tangent_points(laws, params, m_L, m_R, only, F_L, F_R, C_L, C_R, d)
-                ok_L = ok_R = True
+                ok = True                           # both sides admissible
                 for side in range(2):
                     c, q, C, s, Z, k = ((c_L, q_L, C_L, s_L, Z_L, k_L[f]) if side == 0
                                         else (c_R, q_R, C_R, s_R, Z_R, k_R[f]))
                     if state[c] == 0:               # a view: rare path
-                        ok = fill_record(q, rho_L if side == 0 else rho_R, C, normals[c], s, d, slots, ctu)
+                        ok &= fill_record(q, rho_f[side], C, normals[c], s, d, slots, ctu)
                     else:
                         _copy_record(rec, c, s, d, slots, ctu)
-                        ok = state[c] == 1
+                        ok &= state[c] == 1
                     _record_impedance(s, k % slots, Z, d)
-                    if side == 0:
-                        ok_L = ok
-                    else:
-                        ok_R = ok
             else:                               # every cell recorded: no trace read, no tangent needed
-                ok_L = _copy_side(rec, state, c_L, k_L[f] % slots, s_L, Z_L, d)
-                ok_R = _copy_side(rec, state, c_R, k_R[f] % slots, s_R, Z_R, d)
-            if not (ok_L and ok_R):
+                ok = _copy_side(rec, state, c_L, k_L[f] % slots, s_L, Z_L, d)
+                ok &= _copy_side(rec, state, c_R, k_R[f] % slots, s_R, Z_R, d)
+            if not ok:
                 return f
             for i in range(d):              # rows copied, not viewed (views are reference counted)
                 n[i], v_L[i], v_R[i] = N[f, i], s_L[dd + i], s_R[dd + i]
