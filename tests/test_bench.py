@@ -395,6 +395,36 @@ def test_step_replay_runs_a_steps_passes_again_and_puts_the_state_back(monkeypat
         parallel.set_threads(None)
 
 
+def test_one_thread_paths_times_every_pass_called_from_python_and_in_the_compiled_loop(monkeypatch):
+    """bench/one_thread_paths.py: on one thread a DCU plate at 32^2 (one chunk a pass) steps in
+    turn with its passes called from Python (`parallel.rows`) and in the compiled chunk loop over
+    the one chunk (a plan made for each pass, `rows` not called); every pass and the step get a
+    time per round each way, and `parallel._compiled_bounds` is put back after."""
+    import importlib.util
+    from pathlib import Path
+    from skdgmpm import parallel
+
+    path = Path(__file__).parent.parent / "bench" / "one_thread_paths.py"
+    spec = importlib.util.spec_from_file_location("one_thread_paths", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    original = parallel._compiled_bounds
+    marks, rounds, called = [], 2, []
+    script.pass_gaps.timestamped(marks, monkeypatch.setattr)
+    rows = parallel.rows
+    monkeypatch.setattr(parallel, "rows", lambda *a, **k: (called.append(parallel._compiled_bounds), rows(*a, **k))[1])
+    monkeypatch.setattr(parallel, "_PLANS", {})
+    try:
+        times = script.measure("dgmpm-dcu", 32, rounds, marks, warmup=1)
+    finally:
+        parallel.set_threads(None)
+    assert parallel._compiled_bounds is original
+    assert {"interior_pass", "states", "step"} <= set(times["python"]) and set(times["python"]) == set(times["loop"])
+    assert all(len(v) == rounds and min(v) > 0 for way in times.values() for v in way.values())
+    assert called and all(bounds is original for bounds in called)         # rows: the Python way only
+    assert {"interior_pass", "states"} <= {kernel.__name__ for kernel, _, _ in parallel._PLANS}
+
+
 def test_compile_times_records_each_compilation_once_with_its_depth():
     """bench/compile_times.py: a function compiled while its caller compiles is recorded one
     level deeper, inside the caller's time; a signature compiled already is not recorded again,
