@@ -14,11 +14,9 @@ time of each way per step and their ratio (above 1: the pass is slower called fr
 Timings are measurements on the machine at hand, not test results.
 """
 import argparse
-import collections
 import functools
 import importlib.util
 import statistics
-import time
 from pathlib import Path
 
 import numpy as np
@@ -45,29 +43,17 @@ WAYS = {"python": parallel._compiled_bounds, "loop": functools.lru_cache(maxsize
 def measure(method, n, rounds, marks, warmup=2):
     """{way: {pass: [seconds per step]}} (and "step"), one simulation on one thread."""
     step = bench.Stepping(build(bench.scene_for(method, n)))
-    times = {way: collections.defaultdict(list) for way in WAYS}
     previous = parallel.set_threads(1)
     bench._use_threads(1)
+
+    def use(way):
+        parallel._compiled_bounds = WAYS[way]
+
     try:
-        for k in range(warmup + rounds):
-            for way in (("python", "loop") if k % 2 == 0 else ("loop", "python")):
-                parallel._compiled_bounds = WAYS[way]
-                marks.clear()
-                t0 = time.perf_counter()
-                step()
-                t1 = time.perf_counter()
-                if k < warmup:
-                    continue
-                total = collections.Counter()
-                for name, seconds in pass_gaps.split(marks, t0, t1)[1]:
-                    total[name] += seconds
-                for name, seconds in total.items():
-                    times[way][name].append(seconds)
-                times[way]["step"].append(t1 - t0)
+        return pass_gaps.paired_rounds(step, marks, tuple(WAYS), use, rounds, warmup)
     finally:
         parallel._compiled_bounds = WAYS["python"]
         parallel.set_threads(previous)
-    return times
 
 
 def main():

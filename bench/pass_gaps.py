@@ -57,6 +57,37 @@ def split(marks, t0, t1):
     return gaps, passes
 
 
+def step_passes(step, marks):
+    """One ``step()`` timed: (its wall seconds, {pass: its seconds in the step, summed where it
+    runs several times}). The passes must be `timestamped` into ``marks``."""
+    marks.clear()
+    t0 = time.perf_counter()
+    step()
+    t1 = time.perf_counter()
+    total = collections.Counter()
+    for name, seconds in split(marks, t0, t1)[1]:
+        total[name] += seconds
+    return t1 - t0, total
+
+
+def paired_rounds(step, marks, ways, use, rounds, warmup):
+    """{way: {pass: [seconds per step], "step": [...]}} of ``rounds`` timed rounds after
+    ``warmup``: each round steps once each way of the pair ``ways``, in ABBA order (a, b, then b,
+    a), ``use(way)`` called before each step (`step_passes`)."""
+    a, b = ways
+    times = {way: collections.defaultdict(list) for way in ways}
+    for k in range(warmup + rounds):
+        for way in ((a, b) if k % 2 == 0 else (b, a)):
+            use(way)
+            wall, passes = step_passes(step, marks)
+            if k < warmup:
+                continue
+            for name, seconds in passes.items():
+                times[way][name].append(seconds)
+            times[way]["step"].append(wall)
+    return times
+
+
 def measure(method, n, steps, threads, marks):
     """(gaps, passes, walls) over ``steps`` steps of the bench's plate after 5 warm-up steps:
     {name: [seconds per step]} for the gaps and the passes, and the steps' wall times. The

@@ -20,7 +20,6 @@ are measurements on the machine at hand, not test results.
 import argparse
 import collections
 import importlib.util
-import time
 from pathlib import Path
 
 import numpy as np
@@ -91,25 +90,9 @@ def measure(method, n, threads, rounds, marks, counting=None, warmup=3):
     timed step pays for the count)."""
     disc = build(bench.scene_for(method, n))
     step = bench.Stepping(disc)
-    times = {1: collections.defaultdict(list), threads: collections.defaultdict(list)}
     previous = parallel.set_threads(1)      # the setting itself (None: $SKDGMPM_THREADS or every core), put back
     try:
-        for k in range(warmup + rounds):
-            for t in ((1, threads) if k % 2 == 0 else (threads, 1)):
-                bench._use_threads(t)
-                marks.clear()
-                t0 = time.perf_counter()
-                step()
-                t1 = time.perf_counter()
-                if k < warmup:
-                    continue
-                _, passes = pass_gaps.split(marks, t0, t1)
-                total = collections.Counter()
-                for name, seconds in passes:
-                    total[name] += seconds
-                for name, seconds in total.items():
-                    times[t][name].append(seconds)
-                times[t]["step"].append(t1 - t0)
+        times = pass_gaps.paired_rounds(step, marks, (1, threads), bench._use_threads, rounds, warmup)
         if counting is not None:
             counting[0] = True
             try:
