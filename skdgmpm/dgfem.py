@@ -48,42 +48,34 @@ def _apply_blocks(blocks, cell_dofs, R, out, R2=None, base=None, step=1.0):
 
 @kernel_factory
 def _apply_blocks_kernel(nb, nc, two, update):      # two, update: 0 or 1 (R2 added, base + step * ...)
-    if nb is None:                      # sizes read at run time (1D; P >= 3, whose rows outgrow the scratch)
+    if nb is None:                      # sizes read at run time (1D; P >= 3, whose rows outgrow the stack scratch)
         def apply_blocks(blocks, cell_dofs, R, R2, base, step, out):
-            _apply_blocks_n(blocks, cell_dofs, R, R2, base, step, out, blocks.shape[1], R.shape[1], two, update)
-        return apply_blocks
-
-    def apply_blocks(blocks, cell_dofs, R, R2, base, step, out):
-        """Each cell's rows of R (+ R2) gathered into stack scratch before its rows of ``out`` are
-        written: the compiler cannot tell ``out`` from the arrays it reads and, reading them in
-        place, loads them again after every store (the pass x3-4 slower on one thread, where
-        `parallel.chunked` calls it from Python). The same operations in the same order."""
-        x = scratch((nb, nc))
-        for c in range(len(blocks)):
-            for m in range(nb):
-                r = cell_dofs[c, m]
-                for j in range(nc):
-                    x[m, j] = (R[r, j] + R2[r, j]) if two else R[r, j]
-            for k in range(nb):
-                i = cell_dofs[c, k]
-                for j in range(nc):
-                    s = 0.0
-                    for m in range(nb):
-                        s += blocks[c, k, m] * x[m, j]
-                    out[i, j] = base[i, j] + step * s if update else s
+            x = np.empty((blocks.shape[1], R.shape[1]))
+            _apply_blocks_n(blocks, cell_dofs, R, R2, base, step, out, x, blocks.shape[1], R.shape[1], two, update)
+    else:
+        def apply_blocks(blocks, cell_dofs, R, R2, base, step, out):
+            _apply_blocks_n(blocks, cell_dofs, R, R2, base, step, out, scratch((nb, nc)), nb, nc, two, update)
     return apply_blocks
 
 
 @njit(cache=True, inline="always")
-def _apply_blocks_n(blocks, cell_dofs, R, R2, base, step, out, nb, nc, two, update):
+def _apply_blocks_n(blocks, cell_dofs, R, R2, base, step, out, x, nb, nc, two, update):
+    """Each cell's rows of R (+ R2) gathered into ``x`` (nb, nc) before its rows of ``out`` are
+    written: the compiler cannot tell ``out`` from the arrays it reads and, reading them in place,
+    loads them again after every store (the pass x3-4 slower on one thread, where
+    `parallel.chunked` calls it from Python). On the stack (the literal sizes) ``x`` stays in
+    registers. The operations of the sum in place, in the same order."""
     for c in range(len(blocks)):
+        for m in range(nb):
+            r = cell_dofs[c, m]
+            for j in range(nc):
+                x[m, j] = (R[r, j] + R2[r, j]) if two else R[r, j]
         for k in range(nb):
             i = cell_dofs[c, k]
             for j in range(nc):
                 s = 0.0
                 for m in range(nb):
-                    r = cell_dofs[c, m]
-                    s += blocks[c, k, m] * ((R[r, j] + R2[r, j]) if two else R[r, j])
+                    s += blocks[c, k, m] * x[m, j]
                 out[i, j] = base[i, j] + step * s if update else s
 
 
