@@ -29,15 +29,18 @@ pass_gaps = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(pass_gaps)
 
 
+_IN_PYTHON = parallel._compiled_bounds         # the engine's: one chunk runs from Python
+
+
 def _loop_over_one_chunk(n, min_rows, n_threads, *settings):
     """`parallel._compiled_bounds`, but the compiled loop also for one chunk."""
-    bounds = parallel._chunk_bounds(n, min_rows, n_threads, *settings)
-    if not parallel._compiled_layer():
-        return None, 1
-    return bounds, min(parallel.team(n, min_rows), parallel.numba.config.NUMBA_NUM_THREADS)
+    bounds, count = _IN_PYTHON(n, min_rows, n_threads, *settings)
+    if bounds is None and parallel._compiled_layer():
+        return parallel._chunk_bounds(n, min_rows, n_threads, *settings), 1
+    return bounds, count
 
 
-WAYS = {"python": parallel._compiled_bounds, "loop": functools.lru_cache(maxsize=64)(_loop_over_one_chunk)}
+WAYS = {"python": _IN_PYTHON, "loop": functools.lru_cache(maxsize=64)(_loop_over_one_chunk)}
 
 
 def measure(method, n, rounds, marks, warmup=2):

@@ -412,7 +412,12 @@ def test_one_thread_paths_times_every_pass_called_from_python_and_in_the_compile
     marks, rounds, called = [], 2, []
     script.pass_gaps.timestamped(marks, monkeypatch.setattr)
     rows = parallel.rows
-    monkeypatch.setattr(parallel, "rows", lambda *a, **k: (called.append(parallel._compiled_bounds), rows(*a, **k))[1])
+
+    def counted_rows(*args, **kwargs):      # which way the step ran when a pass went to `rows`
+        called.append(parallel._compiled_bounds)
+        return rows(*args, **kwargs)
+
+    monkeypatch.setattr(parallel, "rows", counted_rows)
     monkeypatch.setattr(parallel, "_PLANS", {})
     try:
         times = script.measure("dgmpm-dcu", 32, rounds, marks, warmup=1)
