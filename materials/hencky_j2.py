@@ -77,8 +77,10 @@ def stress_update_point(F, prm, h_n, h, P, d):
     overload (`points.stress_update_point`, built up to three times per kernel) its IR, with the
     Jacobi sweeps, was copied so often that each kernel took 30-40 s to type (docs/bench/session40.md
     §5); called, it compiles once for every kernel. The arrays go through stack copies, so that
-    the caller's own do not escape into the call (`points.tangent_call`)."""
-    F_c, prm_c, h_n_c, h_c, P_c = scratch((3, 3)), scratch((4,)), scratch((7,)), scratch((7,)), scratch((d, d))
+    the caller's own do not escape into the call (`points.tangent_call`), and P whole (3, 3): the
+    call takes no size, so it compiles once for every dimension (a literal d would be a signature of
+    its own)."""
+    F_c, prm_c, h_n_c, h_c, P_c = scratch((3, 3)), scratch((4,)), scratch((7,)), scratch((7,)), scratch((3, 3))
     for i in range(3):
         for a in range(3):
             F_c[i, a] = F[i, a]
@@ -86,7 +88,7 @@ def stress_update_point(F, prm, h_n, h, P, d):
         prm_c[k] = prm[k]
     for k in range(7):
         h_n_c[k] = h_n[k]
-    _return_mapping(F_c, prm_c, h_n_c, h_c, P_c, d)
+    _return_mapping(F_c, prm_c, h_n_c, h_c, P_c)
     for k in range(7):
         h[k] = h_c[k]
     for i in range(d):
@@ -95,15 +97,16 @@ def stress_update_point(F, prm, h_n, h, P, d):
 
 
 @njit(cache=True)
-def _return_mapping(F, prm, h_n, h, P, d):
-    """`stress_update_point`'s body, compiled on its own."""
+def _return_mapping(F, prm, h_n, h, P):
+    """`stress_update_point`'s body, compiled on its own: P (3, 3) whole, each entry its own sum
+    (its d-block the same bits for any d)."""
     mu, lam, sigma_y, H = prm[0], prm[1], prm[2], prm[3]
     ok, _, G = _inverse_transpose(F)
     for k in range(7):
         h[k] = h_n[k]
     if not ok:
-        for i in range(d):
-            for a in range(d):
+        for i in range(3):
+            for a in range(3):
                 P[i, a] = 0.0
         return
     A, V, W = scratch((3, 3)), scratch((3, 3)), scratch((3, 3))
@@ -141,8 +144,8 @@ def _return_mapping(F, prm, h_n, h, P, d):
     for i in range(3):                  # W = tau, the Kirchhoff stress, coaxial with be_trial
         for j in range(3):
             W[i, j] = t0 * V[i, 0] * V[j, 0] + t1 * V[i, 1] * V[j, 1] + t2 * V[i, 2] * V[j, 2]
-    for i in range(d):
-        for a in range(d):
+    for i in range(3):
+        for a in range(3):
             s = 0.0
             for k in range(3):
                 s += W[i, k] * G[3 * k + a]

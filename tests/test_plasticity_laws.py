@@ -311,6 +311,29 @@ def test_point_update_d_block_is_the_block_of_the_3d_update(law, d):
     np.testing.assert_array_equal(h_in, h3)
 
 
+def test_hencky_return_mapping_compiles_once_for_every_dimension():
+    """The Hencky return mapping is called from the point update, not inlined (compile time,
+    `hencky_j2.stress_update_point`); it takes no size, so kernels of every dimension (d a
+    literal in them, a signature of its own if passed on) and Python callers share one body."""
+    from numba import njit
+
+    def kernel(d):
+        @njit
+        def update(F, prm, h_n, h, P):
+            hencky_j2.stress_update_point(F, prm, h_n, h, P, d)
+        return update
+
+    mat = HenckyJ2(**{**PLASTIC, "sigma_y": 0.01})
+    prm, h_n, F = np.array(mat.law_parameters), mat.initial_history(1)[0], I3 + 0.1 * random_F(0.2, 3)
+    P3 = np.zeros((3, 3))
+    hencky_j2.stress_update_point(F, prm, h_n, np.zeros(7), P3, 3)
+    for d in (1, 2, 3):
+        P = np.zeros((d, d))
+        kernel(d)(F, prm, h_n, np.zeros(7), P)
+        np.testing.assert_array_equal(P, P3[:d, :d])
+    assert len(hencky_j2._return_mapping.signatures) == 1
+
+
 @pytest.mark.filterwarnings("error")
 def test_hencky_inverted_point_is_finite():
     mat = HenckyJ2(**PLASTIC)
