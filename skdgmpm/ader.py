@@ -193,15 +193,18 @@ def _block_scale(U, dd):
 
 @njit(cache=True, nogil=True)
 def _block_max(U, dd):
-    """The largest |U| of the F block and of the p block of rows U, nan once one is nan."""
-    big = np.zeros(2)
+    """The largest |U| of the F block and of the p block of rows U, nan once one is nan (held in
+    scalars: stores to a heap array could alias U, which is then reloaded)."""
+    big_F = big_p = 0.0
     for p in range(len(U)):
         for c in range(U.shape[1]):
             x = abs(U[p, c])
-            k = 0 if c < dd else 1
-            if x > big[k] or x != x:
-                big[k] = x
-    return big[0], big[1]
+            if c < dd:
+                if x > big_F or x != x:
+                    big_F = x
+            elif x > big_p or x != x:
+                big_p = x
+    return big_F, big_p
 
 
 def _time_sum(w, a):

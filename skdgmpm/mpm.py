@@ -402,8 +402,9 @@ def _all_finite(a):
 @njit(cache=True, nogil=True)
 def _per_mass(nodal, mass, filled, out):
     for i in range(len(out)):
+        m, has = mass[i], filled[i]     # read once: a store to out could alias them (called from Python)
         for k in range(out.shape[1]):
-            out[i, k] = nodal[i, k] / mass[i] if filled[i] else 0.0
+            out[i, k] = nodal[i, k] / m if has else 0.0
 
 
 # ---------------------------------------------------------------- per-particle passes (literal d)

@@ -240,3 +240,28 @@ def test_picard_keys_reach_the_predictor_and_bad_values_name_the_key():
     for key, value in (("picard_max", "0"), ("picard_tol", "-1e-3")):
         with pytest.raises(InputError, match=f"method.{key} = "):
             build(load_scene("plate_impact_neohookean_2d", [*dgfem, f"method.{key}={value}"]))
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_block_scale_is_each_blocks_largest_magnitude_one_where_zero_nan_where_any_is(threads):
+    """The Picard iteration's change scale (`ader._block_scale`), chunked over rows on the
+    threads, against numpy's max of |U| per block (F: the first dd components, p: the rest)."""
+    from skdgmpm import parallel
+    from skdgmpm.ader import _block_scale
+
+    rng = np.random.default_rng(7)
+    U = rng.standard_normal((3 * parallel.MIN_ROWS * 2 + 5, 6))
+    U[17, 1] = -40.0                            # the largest |F| a negative entry, in one chunk
+    previous = parallel.set_threads(threads)
+    try:
+        scale = _block_scale(U, 4)
+        np.testing.assert_array_equal(scale, [40.0] * 4 + [np.abs(U[:, 4:]).max()] * 2)
+        zero_p = U.copy()
+        zero_p[:, 4:] = 0.0
+        np.testing.assert_array_equal(_block_scale(zero_p, 4)[4:], [1.0, 1.0])
+        nan_late = U.copy()
+        nan_late[-1, 5] = np.nan                # the last row, in the last chunk: p's scale nan, F's not
+        scale = _block_scale(nan_late, 4)
+        assert np.isnan(scale[4:]).all() and scale[:4].tolist() == [40.0] * 4
+    finally:
+        parallel.set_threads(previous)
