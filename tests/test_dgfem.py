@@ -85,3 +85,28 @@ def test_mass_blocks_give_the_bits_of_the_row_by_row_sum(nb, nc, two, update):
                     s += float(blocks[c, k, m]) * (float(R[r, j] + R2[r, j]) if two else float(R[r, j]))
                 expected[cell_dofs[c, k], j] = float(base[cell_dofs[c, k], j]) + 0.3 * s if update else s
     assert np.array_equal(out, expected)
+
+
+@pytest.mark.parametrize("method", ["rk-dgfem", "ader-dgfem", "ader-dgmpm"])
+def test_the_initial_state_is_assessed_by_the_steps_own_law_pass(method):
+    """A DG method's initial state takes Q and its health from the step's law pass
+    (`MaterialSet.update_and_assess`), not from kernels of their own: the same bits as the law's
+    stand-alone pass and the stand-alone health check (`skdgmpm.health.assess`), and the same
+    wave speeds for the first time step. The neo-Hookean manufactured solution starts from its
+    exact state: F != I and v2 != 0 at the points."""
+    from skdgmpm.build import build
+    from skdgmpm.health import assess
+    from skdgmpm.scene import load_scene
+
+    integrator = ['method.integrator="rk2"'] if method == "rk-dgfem" else []
+    scene = load_scene("mms_axis_aligned_2d", ["grid.cells=[6,4]", f'method.name="{method}"', "method.order=1",
+                                               *integrator])
+    disc = build(scene)
+    stepper, state = disc.stepper, disc.initial
+    points = stepper.gauss
+    Q = stepper.materials.state(state.U, points.material, points.rho0, state.history)
+    assert np.abs(Q[:, :4] - Q[0, :4]).max() > 0 and np.abs(Q[:, 5]).max() > 0     # P varies, v2 != 0
+    np.testing.assert_array_equal(state.Q, Q)
+    alone = assess(stepper.materials, points, state.U, state.Q)
+    np.testing.assert_array_equal(state.speed, alone.speed)
+    assert state.health == alone.record() and state.fastest == alone.fastest
