@@ -172,3 +172,4 @@ class ADERDGMPM(ADERDGFEM):
         return self.step_with_cfl_guard(state, dt_max, attempt)
 
     initial_state = GodunovScheme.initial_state          # the state lives on the particles
+    initial_pass = "law"                                  # `constitutive_update`'s pass, as the step's

@@ -294,11 +294,7 @@ class DGFEM(GodunovScheme):
         dofs = self.project(U)
         history = self.materials.initial_history(self.cell_material[self.gauss.cell])
         state = ParticleState(t, parallel.matmul(self.B, dofs), None, self.particles.X.copy(), dofs=dofs, history=history)
-        # the step's own pass (`evaluate_points`) gives Q and the health: no kernel of its own to
-        # compile (its arguments typed as the step's: the old velocities a column view of a Q)
-        no_motion = (state.x, np.zeros_like(state.U)[:, self.d * self.d:], 0.0)
-        state.Q, _, health, _ = self.materials.update_and_assess(state.U, self.gauss.material, self.gauss.rho0,
-                                                                 history, no_motion)
+        state.Q, _, health = self.at_rest(state, self.gauss)     # `evaluate_points`'s pass; the history virgin
         self.check(state, health)
         return state
 

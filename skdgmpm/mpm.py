@@ -100,6 +100,8 @@ class MPM(GodunovScheme):
     body_force : None or callable b(X, t) -> (n, d) (m/s^2) at reference positions
     """
 
+    initial_pass = "stress and health"      # `stress_update` with the health: the step's pass
+
     grid: object
     particles: object
     materials: object

@@ -138,6 +138,10 @@ class GodunovScheme:
     cfl_guard = "predict"        # or "largest" (method.cfl_guard)
     body_force = None            # b(X, t) -> (n, d) in m/s^2 (a manufactured solution's); None: no source
     stages = ()                  # the `stage` methods of a step, in the order they run
+    # the initial state's law pass, the step's own where it can be called on a given state, so that
+    # t = 0 compiles no kernel of its own: "law" (`constitutive_update`'s), "stress and health"
+    # (MPM's), "stress" then the stand-alone health check (DGMPM: its step pass forms its states)
+    initial_pass = "stress"
 
     def stage_times(self, reset=False):
         """{stage: (seconds, calls)} since the start (or the last reset), in the order of
@@ -263,12 +267,33 @@ class GodunovScheme:
     def initial_state(self, F, v, t=0.0):
         """ParticleState from particle F (n, d, d) and v (n, d), the laws' internal variables in
         their virgin state."""
-        history = self.materials.initial_history(self.particles.material)
-        P, history = self.materials.stress_update(F, self.particles.material, history)
-        U = system.join(F, self.particles.rho0[:, None] * v)
-        state = ParticleState(t, U, system.join(P, v), self.particles.X.copy(), history=history)
-        self.check(state)
+        points, d = self.particles, self.d
+        history = self.materials.initial_history(points.material)
+        U = system.join(F, points.rho0[:, None] * v)
+        state = ParticleState(t, U, None, points.X.copy(), history=history)
+        if self.initial_pass == "law":          # the step's `constitutive_update` pass (ADER-DGMPM)
+            state.Q, state.history, health = self.at_rest(state, points)
+            state.Q[:, d * d:] = v              # v as given, not p / rho0 recomputed
+        else:                                   # "stress"; "stress and health": MPM's step pass
+            P, state.history, *health = self.materials.stress_update(F, points.material, history,
+                                                                      assess=self.initial_pass == "stress and health")
+            state.Q = system.join(P, v)
+            # the health of F and P came with the stress: the state's where p and v are finite too
+            # (else the whole check: the first bad point and its message)
+            finite = np.isfinite(U[:, d * d:]).all() and np.isfinite(v).all()
+            health = health[0] if health and finite else None
+        self.check(state, health)
         return state
+
+    def at_rest(self, state, points):
+        """(Q, history updated, `Health`) of the state's U at ``points`` from the law's pass of
+        `constitutive_update` (`MaterialSet.update_and_assess`), its arguments typed as that pass
+        types them (the old velocities a column view of a Q; no motion): an initial state that
+        compiles no kernel of its own."""
+        no_motion = (state.x, np.zeros_like(state.U)[:, self.d * self.d:], 0.0)
+        Q, history, health, _ = self.materials.update_and_assess(state.U, points.material, points.rho0,
+                                                                 state.history, no_motion)
+        return Q, history, health
 
     def step_with_cfl_guard(self, state, dt_max, attempt):
         """Run ``attempt(dt) -> (new state, boundary work)``; repeat with a smaller Delta t if the

@@ -87,23 +87,26 @@ def test_mass_blocks_give_the_bits_of_the_row_by_row_sum(nb, nc, two, update):
     assert np.array_equal(out, expected)
 
 
-@pytest.mark.parametrize("method", ["rk-dgfem", "ader-dgfem", "ader-dgmpm"])
-def test_the_initial_state_is_assessed_by_the_steps_own_law_pass(method):
+@pytest.mark.parametrize("method", ["rk-dgfem", "ader-dgfem", "ader-dgmpm", "mpm", "dgmpm"])
+def test_the_initial_state_is_assessed_by_the_steps_own_law_pass(method, monkeypatch):
     """A DG method's initial state takes Q and its health from the step's law pass
-    (`MaterialSet.update_and_assess`), not from kernels of their own: the same bits as the law's
-    stand-alone pass and the stand-alone health check (`skdgmpm.health.assess`), and the same
-    wave speeds for the first time step. The neo-Hookean manufactured solution starts from its
-    exact state: F != I and v2 != 0 at the points."""
+    (`MaterialSet.update_and_assess`), MPM's from its step's stress pass (`stress_update` with the
+    health), not from kernels of their own (DGMPM, whose step pass forms its states, keeps the
+    stand-alone ones): the same bits as the law's stand-alone pass and the stand-alone health check
+    (`skdgmpm.health.assess`), and the same wave speeds for the first time step. The neo-Hookean
+    manufactured solution starts from its exact state: F != I and v2 != 0 at the points."""
     from skdgmpm.build import build
     from skdgmpm.health import assess
     from skdgmpm.scene import load_scene
 
-    integrator = ['method.integrator="rk2"'] if method == "rk-dgfem" else []
-    scene = load_scene("mms_axis_aligned_2d", ["grid.cells=[6,4]", f'method.name="{method}"', "method.order=1",
-                                               *integrator])
+    keys = {"rk-dgfem": ["method.order=1", 'method.integrator="rk2"'], "mpm": []}.get(method, ["method.order=1"])
+    scene = load_scene("mms_axis_aligned_2d", ["grid.cells=[6,4]", f'method.name="{method}"', *keys])
+    if method != "dgmpm":                       # the stand-alone check (a kernel of its own) is not run
+        monkeypatch.setattr("skdgmpm.scheme.assess", lambda *args: pytest.fail("stand-alone health check"))
     disc = build(scene)
+    monkeypatch.undo()
     stepper, state = disc.stepper, disc.initial
-    points = stepper.gauss
+    points = stepper.gauss if method in ("rk-dgfem", "ader-dgfem", "ader-dgmpm") else stepper.particles
     Q = stepper.materials.state(state.U, points.material, points.rho0, state.history)
     assert np.abs(Q[:, :4] - Q[0, :4]).max() > 0 and np.abs(Q[:, 5]).max() > 0     # P varies, v2 != 0
     np.testing.assert_array_equal(state.Q, Q)
