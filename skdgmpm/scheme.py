@@ -280,8 +280,7 @@ class GodunovScheme:
             state.Q = system.join(P, v)
             # the health of F and P came with the stress: the state's where p and v are finite too
             # (else the whole check: the first bad point and its message)
-            finite = np.isfinite(U[:, d * d:]).all() and np.isfinite(v).all()
-            health = health[0] if health and finite else None
+            health = health[0] if health and np.isfinite(U[:, d * d:]).all() and np.isfinite(v).all() else None
         self.check(state, health)
         return state
 
