@@ -198,6 +198,49 @@ class DGMPM(GodunovScheme):
         cell): the face passes then read no trace (CTU: the cells split the fluctuations)."""
         return self.cellwise or bool(np.all(state != 0))
 
+    @property
+    def initial_pass(self):
+        """The initial state's law pass (`GodunovScheme.initial_pass`): with one particle per cell
+        the step's own (`at_rest`), which takes the state as given and writes its cell records
+        beside it; otherwise the step's pass forms each point's state from the nodes, and t = 0
+        takes the stand-alone stress pass and health check."""
+        return "law" if self.cellwise else "stress"
+
+    def at_rest(self, state, points):
+        """With one particle per cell, the step's law pass called as the step calls it (`step`),
+        the state's cell records written in it: t = 0 compiles no kernel of its own, neither the
+        stand-alone passes nor `cell_records` for the first step's faces. Where the step forms its
+        rows in that pass (`rows_in_law_pass`), they are those of a stage that adds nothing
+        (`_rows_at_rest`)."""
+        if not self.cellwise:
+            return super().at_rest(state, points)
+        rec, rec_state = self._records()
+        records = (rec, self.point_cell, self.cell_normals, rec_state)
+        no_motion = (state.x, np.zeros_like(state.U)[:, self.d * self.d:], 0.0)
+        U, gather = state.U, None
+        if self.rows_in_law_pass:
+            U, gather = np.empty(state.U.shape), self._rows_at_rest(state.U)
+        Q, history, health, _ = self.materials.update_and_assess(U, points.material, points.rho0, state.history,
+                                                                 no_motion, gather, records)
+        return Q, history, health
+
+    def _rows_at_rest(self, U):
+        """The particles' rows (`CellRows`) of a forward Euler stage that adds nothing to U, its
+        arrays typed as the step's (the same kernel): no fluxes, and a step of -0.0, since x + -0.0
+        is x for every x (-0.0 + +0.0 would be +0.0): each row is U's, bit for bit."""
+        (nf, nb), nc = (len(self.interior), len(self.boundary)), U.shape[1]
+        sides = 0 if self.ctu is None else 2            # `interface_flux`'s corrections
+        return CellRows(self.particles.cell, self.cell_faces, self.interior.measure, np.zeros((nf, nc)),
+                        np.zeros((nf, sides, nc)), 0.0, -0.0, self.inv_volume, U, np.zeros((nb, nc)))
+
+    def initial_state(self, F, v, t=0.0):
+        state = super().initial_state(F, v, t)
+        if self.cellwise:       # a record begins with its state q (`fill_record`): v as given there too
+            face = self._records()[0][0]
+            face[self.point_cell, :state.Q.shape[1]] = state.Q
+            self._records_of = (state.U, state.Q)       # the first step's faces read them
+        return state
+
     # ---------------------------------------------------------------- set-up
     def _setup_cell_faces(self):
         """What `cell_records` and the face pass read: each cell's nodes (n_cells, nodes), the local

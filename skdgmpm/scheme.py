@@ -140,7 +140,8 @@ class GodunovScheme:
     stages = ()                  # the `stage` methods of a step, in the order they run
     # the initial state's law pass, the step's own where it can be called on a given state, so that
     # t = 0 compiles no kernel of its own: "law" (`constitutive_update`'s), "stress and health"
-    # (MPM's), "stress" then the stand-alone health check (DGMPM: its step pass forms its states)
+    # (MPM's), "stress" then the stand-alone health check (DGMPM with nodal stages: its step pass
+    # forms each point's state from the nodes)
     initial_pass = "stress"
 
     def stage_times(self, reset=False):

@@ -91,10 +91,11 @@ def test_mass_blocks_give_the_bits_of_the_row_by_row_sum(nb, nc, two, update):
 def test_the_initial_state_is_assessed_by_the_steps_own_law_pass(method, monkeypatch):
     """A DG method's initial state takes Q and its health from the step's law pass
     (`MaterialSet.update_and_assess`), MPM's from its step's stress pass (`stress_update` with the
-    health), not from kernels of their own (DGMPM, whose step pass forms its states, keeps the
-    stand-alone ones): the same bits as the law's stand-alone pass and the stand-alone health check
-    (`skdgmpm.health.assess`), and the same wave speeds for the first time step. The neo-Hookean
-    manufactured solution starts from its exact state: F != I and v2 != 0 at the points."""
+    health), not from kernels of their own (DGMPM with 2 x 2 particles per cell, whose step pass
+    forms each point's state from the nodes, keeps the stand-alone ones; with one particle per
+    cell, tests/test_layout.py): the same bits as the law's stand-alone pass and the stand-alone
+    health check (`skdgmpm.health.assess`), and the same wave speeds for the first time step. The
+    neo-Hookean manufactured solution starts from its exact state: F != I and v2 != 0 at the points."""
     from skdgmpm.build import build
     from skdgmpm.health import assess
     from skdgmpm.scene import load_scene

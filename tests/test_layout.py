@@ -105,3 +105,73 @@ def test_records_of_the_constitutive_update_are_those_of_the_record_pass(case):
     again = st.step(disc.initial)           # stepped from the initial state: its own records
     other = fresh.step(disc.initial)
     assert again.t == other.t and np.array_equal(again.Q, other.Q)
+
+
+AT_REST = {**{k: CASES[k] for k in ("impact-ctu", "impact-dcu", "bar-1d", "elastoplastic-1d", "ring-body-force")},
+           "linear-ctu": ("plate_impact_neohookean_2d", ["grid.cells=[12, 9]", 'material.law="linear_elastic"'])}
+
+
+def _bits(a):
+    return np.ascontiguousarray(a, dtype=float).view(np.uint64)      # -0.0 and +0.0 told apart
+
+
+@pytest.mark.parametrize("case", AT_REST)
+def test_the_initial_state_takes_the_steps_law_pass_and_its_records(case, monkeypatch):
+    """With one particle per cell the initial state comes from the step's own law pass
+    (`DGMPM.at_rest`), which also writes the cell records that the first step's faces read: t = 0
+    compiles neither the stand-alone stress pass and health check nor the record pass (each
+    patched to fail here). The reference is those stand-alone passes (`MaterialSet.stress_update`,
+    `skdgmpm.health.assess`, `dgmpm_kernels.cell_records`), bit for bit: Q, the history, the wave
+    speeds, the health, the records, and the first step against one whose records the record pass
+    made. F and v hold -0.0 (and F != I, v != 0 elsewhere): the rows of the stage that adds
+    nothing (`DGMPM._rows_at_rest`) are U's, bit for bit (with a step of +0.0, -0.0 came back +0.0).
+    The case "linear-ctu": a law whose tangent does not depend on F."""
+    from skdgmpm import constitutive, system
+    from skdgmpm.dgmpm_kernels import cell_update
+    from skdgmpm.health import assess
+
+    name, overrides = AT_REST[case]
+    twin = build(load_scene(name, overrides)).stepper
+    st = build(load_scene(name, overrides)).stepper
+    assert st.cellwise and st.initial_pass == "law"
+    n, d = len(st.particles), st.d
+    rng = np.random.default_rng(3)
+    F = np.broadcast_to(np.eye(d), (n, d, d)) + 1e-3 * rng.standard_normal((n, d, d))
+    v = 10.0 * rng.standard_normal((n, d))
+    F[::3] = np.eye(d) * np.where(np.eye(d) > 0, 1.0, -1.0)       # off-diagonal -0.0
+    v[::2, 0] = -0.0
+    for target in ("skdgmpm.scheme.assess", "skdgmpm.dgmpm.cell_records"):
+        monkeypatch.setattr(target, lambda *args, target=target: pytest.fail(target))
+    monkeypatch.setattr(constitutive.MaterialSet, "stress_update", lambda *args, **kw: pytest.fail("stress pass"))
+    state = st.initial_state(F, v)
+    first = st.step(state)
+    monkeypatch.undo()
+
+    P, history = st.materials.stress_update(F, st.particles.material, st.materials.initial_history(st.particles.material))
+    np.testing.assert_array_equal(_bits(state.Q), _bits(system.join(P, v)))
+    np.testing.assert_array_equal(_bits(state.U), _bits(system.join(F, st.particles.rho0[:, None] * v)))
+    if st.materials.n_history:
+        np.testing.assert_array_equal(_bits(state.history), _bits(history))
+    alone = assess(st.materials, st.particles, state.U, state.Q)
+    np.testing.assert_array_equal(state.speed, alone.speed)
+    assert state.health == alone.record() and state.fastest == alone.fastest
+    if st.rows_in_law_pass:
+        rows = np.empty(state.U.shape)
+        cell_update(st._rows_at_rest(state.U), rows)
+        np.testing.assert_array_equal(_bits(rows), _bits(state.U))
+
+    reference = twin.initial_state(F, v)
+    twin._records_of = None                 # the first step's records from the record pass
+    (face, split), rec_state = twin._records()
+    twin.interface_flux(GridState(reference.U, reference.Q))
+    made = (face.copy(), split.copy(), rec_state.copy())
+    twin._records_of = None
+    other = twin.step(reference)
+    assert first.t == other.t
+    for key in ("U", "Q", "x", "history"):
+        np.testing.assert_array_equal(_bits(getattr(first, key)), _bits(getattr(other, key)))
+    ours = st.initial_state(F, v)           # the records this state's pass wrote
+    assert st._records_of[0] is ours.U and st._records_of[1] is ours.Q
+    (face, split), rec_state = st._records()
+    for a, b in zip(made, (face, split, rec_state)):
+        np.testing.assert_array_equal(_bits(a) if a.dtype.kind == "f" else a, _bits(b) if b.dtype.kind == "f" else b)
