@@ -1,5 +1,6 @@
 """Where and how the compiled kernels are made and kept: a disk cache keyed on the package's
-sources, one compiled kernel per dimension (or other literal size), and the first run's notice.
+sources, one compiled kernel per dimension (or other literal size). The first run's notice is
+`skdgmpm.first_run` (no compiled code: its estimates change without changing the cache's key).
 
 The cache
 ---------
@@ -72,20 +73,12 @@ its cells' contents (here d), so each d is cached on disk apart. Rules:
   compiled code;
 - sizes not worth a kernel of their own map to None, e.g. ``(nb, nc) if nb in (4, 9) else (None,
   None)``, and the factory then returns a body that reads them from the arrays.
-
-The notice
-----------
-`compile_notice` (a context manager around a run) prints one line on stderr the first time a
-kernel of this package is actually compiled, i.e. only when the cache misses.
 """
 import functools
 import hashlib
 import importlib.util
-import json
 import os
 import re
-import sys
-import time
 from pathlib import Path
 
 import llvmlite.ir as ir
@@ -300,75 +293,3 @@ def scratch(typingctx, shape):
             context.call_conv.return_user_exc(builder, ValueError, ("scratch: more than SCRATCH_SIZE entries",))
         return np_cfarray(context, builder, array(types.CPointer(types.float64), shape), (data, args[0]))
     return array(shape), codegen
-
-
-# ---------------------------------------------------------------- the first run's notice
-# CPU seconds to compile a scene's kernels from a cold cache, per method and dimension: on the
-# 2-core VM of docs/bench/session39.md and session40.md, bar_elastic_1d 20-23 s (dgmpm), 33 s
-# (ader-dgfem), 19 s (mpm), plate_impact_neohookean_2d 47-57 s (dgmpm), standing_wave_2d 50 s
-# (ader-dgfem), 28 s (mpm); multiholed_cell_j2_2d 43-44 s (ader-dgmpm, Hencky J2: session42.md);
-# the others estimated alike. The notice says the last one measured on this machine instead
-# (<base>/compile_seconds.json) where there is one.
-EXPECTED_S = {"dgmpm": {1: 25, 2: 55}, "mpm": {1: 20, 2: 30}, "rk-dgfem": {1: 35, 2: 40},
-              "ader-dgfem": {1: 35, 2: 50}, "ader-dgmpm": {1: 35, 2: 45}}
-
-
-def _measured_path():
-    return os.path.join(cache_base(), "compile_seconds.json")
-
-
-def _measured():
-    try:
-        with open(_measured_path()) as f:
-            return json.load(f)
-    except (OSError, ValueError):
-        return {}
-
-
-NOTICE = "compiling kernels for "       # the notice's first words (a reader of stderr can set it aside)
-
-
-class compile_notice(event.Listener):
-    """A context manager around a run (re-enterable): within, the first time one of this
-    package's kernels is compiled (the cache lacks it), print `NOTICE` "<method>, <d>D (first
-    run, about N s; cached afterwards in <dir>)" on ``stream`` (stderr); nothing when every
-    kernel comes from the cache. ``seconds``: the CPU time spent compiling within, remembered as
-    the next estimate for this method and dimension."""
-
-    def __init__(self, method, d, stream=None):
-        self.what, self.stream = f"{method}, {d}D", stream
-        self.expected = EXPECTED_S.get(method, {}).get(d)
-        self.shown, self.depth, self.seconds, self._start = False, 0, 0.0, 0.0
-
-    def __enter__(self):
-        event.register("numba:compile", self)
-        return self
-
-    def __exit__(self, *exc):
-        event.unregister("numba:compile", self)
-        self.depth = 0
-        if self.shown and self.seconds > 1:         # remember how long it took (best effort)
-            try:
-                measured = {**_measured(), self.what: round(self.seconds)}
-                with open(_measured_path(), "w") as f:
-                    json.dump(measured, f, indent=1)
-            except OSError:
-                pass
-
-    def on_start(self, ev):
-        self.depth += 1
-        if self.depth > 1:
-            return
-        self._start = time.process_time()
-        if not self.shown and ours(ev):
-            self.shown = True
-            expected = _measured().get(self.what, self.expected)
-            about = f"about {expected} s; " if expected else ""
-            from tqdm import tqdm               # clears a progress bar on the stream, then redraws it
-            tqdm.write(f"{NOTICE}{self.what} (first run, {about}cached afterwards in {cache_dir()})",
-                       file=self.stream or sys.stderr)
-
-    def on_end(self, ev):
-        self.depth -= 1
-        if self.depth == 0:
-            self.seconds += time.process_time() - self._start

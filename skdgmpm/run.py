@@ -16,7 +16,7 @@ from . import checkpoint, guards, outdir, output, parallel, probes as gauges
 from .build import build
 from .errors import InputError, InstabilityError, OutputError
 from .exact import relative_errors
-from .kernel_cache import compile_notice
+from .first_run import compile_notice
 from .scene import Scene, exact_solution, load_scene
 
 

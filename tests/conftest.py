@@ -1,7 +1,7 @@
 """Shared test set-up.
 
 The first run of a process that compiles a kernel prints one line on stderr saying so
-(`skdgmpm.kernel_cache.compile_notice`). Which test compiles first depends on the order and on
+(`skdgmpm.first_run.compile_notice`). Which test compiles first depends on the order and on
 the state of the disk cache (a clean CI compiles everything), so the tests that check a command's
 stderr line by line would see that line or not by chance: here it is written to a sink. The
 notice itself is tested in tests/test_kernel_cache.py and tests/test_first_hour.py."""
@@ -9,11 +9,11 @@ import io
 
 import pytest
 
-from skdgmpm import kernel_cache
+from skdgmpm import first_run
 from skdgmpm import run as run_module
 
 
 @pytest.fixture(autouse=True)
 def silent_compile_notice(monkeypatch):
     monkeypatch.setattr(run_module, "compile_notice",
-                        lambda method, d: kernel_cache.compile_notice(method, d, stream=io.StringIO()))
+                        lambda method, d: first_run.compile_notice(method, d, stream=io.StringIO()))

@@ -13,7 +13,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pytest
 
-from skdgmpm import checkpoint, kernel_cache
+from skdgmpm import checkpoint, first_run
 from skdgmpm.build import build
 from skdgmpm.cli import EXIT_INPUT, EXIT_INTERRUPTED, main
 from skdgmpm.errors import InputError
@@ -128,8 +128,8 @@ def test_signals_from_outside_checkpoint_and_exit_75(tmp_path, signum):
     proc.send_signal(signum)
     stdout, stderr = proc.communicate(timeout=120)
     assert proc.returncode == EXIT_INTERRUPTED, stderr
-    # one line, but for the first run's notice where the cache was cold (kernel_cache.compile_notice)
-    lines = [line for line in stderr.strip().splitlines() if not line.startswith(kernel_cache.NOTICE)]
+    # one line, but for the first run's notice where the cache was cold (first_run.compile_notice)
+    lines = [line for line in stderr.strip().splitlines() if not line.startswith(first_run.NOTICE)]
     assert len(lines) == 1 and "Traceback" not in stderr, stderr
     name = {signal.SIGINT: "SIGINT", signal.SIGTERM: "SIGTERM"}[signum]
     assert lines[0].startswith(f"stopped by {name} at step ") and lines[0].endswith(f"skdgmpm run --resume {out}")

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import skdgmpm
-from skdgmpm import kernel_cache
+from skdgmpm import first_run, kernel_cache
 
 
 def python(code, cwd, pythonpath=None, cache=None):
@@ -126,8 +126,8 @@ def test_a_kernel_that_cannot_be_cached_gets_numbas_warning_naming_its_file():
     assert "Cannot cache compiled function" in str(caught[0].message)
 
 
-NOTICE_RUN = ("import json, sys, numpy as np; from skdgmpm import kernel_cache, system; "
-              "notice = kernel_cache.compile_notice('dgmpm', 1)\n"
+NOTICE_RUN = ("import json, sys, numpy as np; from skdgmpm import first_run, kernel_cache, system; "
+              "notice = first_run.compile_notice('dgmpm', 1)\n"
               "with notice: system.embed(np.ones((3, 1, 1)))\n"
               "print(json.dumps([notice.seconds, kernel_cache.cache_dir()]))")
 
@@ -135,7 +135,7 @@ NOTICE_RUN = ("import json, sys, numpy as np; from skdgmpm import kernel_cache, 
 def test_the_first_run_says_it_compiles_and_a_cached_one_does_not(tmp_path):
     (seconds, where), first = python(NOTICE_RUN, cwd=tmp_path, cache=tmp_path / "cache")
     assert where.startswith(str(tmp_path / "cache" / "kernels-")) and seconds > 0
-    assert first.count(kernel_cache.NOTICE + "dgmpm, 1D (first run, about ") == 1 and where in first
+    assert first.count(first_run.NOTICE + "dgmpm, 1D (first run, about ") == 1 and where in first
     (seconds, _), again = python(NOTICE_RUN, cwd=tmp_path, cache=tmp_path / "cache")
     assert seconds == 0 and "compiling" not in again
 

@@ -1,0 +1,84 @@
+"""The first run's notice: one line on stderr the first time a run compiles a kernel of this
+package (the cache misses), with about how long it will take, and nothing when every kernel comes
+from the cache (`compile_notice`, a context manager around a run). No compiled code here: its
+estimates change without changing the kernel cache's key (`skdgmpm.kernel_cache`)."""
+import json
+import os
+import sys
+import time
+
+from numba.core import event
+
+from .kernel_cache import cache_base, cache_dir, ours
+
+# CPU seconds to compile a scene's kernels from a cold cache, per method and dimension, on the
+# 2-core VM of docs/bench/session39.md to session43.md: bar_elastic_1d 11-16 s (dgmpm, one
+# particle per cell, its initial state from the step's own pass: session43.md §1; 20-23 s
+# before), 33 s (ader-dgfem), 19 s (mpm); plate_impact_neohookean_2d 22-31 s (dgmpm, one
+# particle per cell; 34-57 s before), standing_wave_2d 43-47 s (dgmpm, 2 x 2 particles per cell),
+# 29 s (ader-dgfem P1, session42.md), 28 s (mpm); multiholed_cell_j2_2d 43-44 s (ader-dgmpm,
+# Hencky J2); the others estimated alike. The notice says the last one measured on this machine
+# instead (<base>/compile_seconds.json) where there is one.
+EXPECTED_S = {"dgmpm": {1: 15, 2: 35}, "mpm": {1: 20, 2: 30}, "rk-dgfem": {1: 35, 2: 40},
+              "ader-dgfem": {1: 35, 2: 50}, "ader-dgmpm": {1: 35, 2: 45}}
+
+
+def _measured_path():
+    return os.path.join(cache_base(), "compile_seconds.json")
+
+
+def _measured():
+    try:
+        with open(_measured_path()) as f:
+            return json.load(f)
+    except (OSError, ValueError):
+        return {}
+
+
+NOTICE = "compiling kernels for "       # the notice's first words (a reader of stderr can set it aside)
+
+
+class compile_notice(event.Listener):
+    """A context manager around a run (re-enterable): within, the first time one of this
+    package's kernels is compiled (the cache lacks it), print `NOTICE` "<method>, <d>D (first
+    run, about N s; cached afterwards in <dir>)" on ``stream`` (stderr); nothing when every
+    kernel comes from the cache. ``seconds``: the CPU time spent compiling within, remembered as
+    the next estimate for this method and dimension."""
+
+    def __init__(self, method, d, stream=None):
+        self.what, self.stream = f"{method}, {d}D", stream
+        self.expected = EXPECTED_S.get(method, {}).get(d)
+        self.shown, self.depth, self.seconds, self._start = False, 0, 0.0, 0.0
+
+    def __enter__(self):
+        event.register("numba:compile", self)
+        return self
+
+    def __exit__(self, *exc):
+        event.unregister("numba:compile", self)
+        self.depth = 0
+        if self.shown and self.seconds > 1:         # remember how long it took (best effort)
+            try:
+                measured = {**_measured(), self.what: round(self.seconds)}
+                with open(_measured_path(), "w") as f:
+                    json.dump(measured, f, indent=1)
+            except OSError:
+                pass
+
+    def on_start(self, ev):
+        self.depth += 1
+        if self.depth > 1:
+            return
+        self._start = time.process_time()
+        if not self.shown and ours(ev):
+            self.shown = True
+            expected = _measured().get(self.what, self.expected)
+            about = f"about {expected} s; " if expected else ""
+            from tqdm import tqdm               # clears a progress bar on the stream, then redraws it
+            tqdm.write(f"{NOTICE}{self.what} (first run, {about}cached afterwards in {cache_dir()})",
+                       file=self.stream or sys.stderr)
+
+    def on_end(self, ev):
+        self.depth -= 1
+        if self.depth == 0:
+            self.seconds += time.process_time() - self._start
