@@ -179,6 +179,24 @@ def identity_if_not(ok, F):
                 F[i, a] = 1.0 if i == a else 0.0
 
 
+def with_momenta(health, p, v):
+    """The health of a stress pass, of F and P (`MaterialSet.stress_update`), as the state's where
+    its momenta p and velocities v are finite too, else None: the whole check (`assess`), which
+    finds the first bad point and says it."""
+    return health if health is not None and _all_finite(p) and _all_finite(v) else None
+
+
+@njit(cache=True, nogil=True)
+def _all_finite(a):
+    """Whether every entry of a (n, k) array (a strided view will do) is finite: one pass, no
+    temporaries."""
+    for i in range(a.shape[0]):
+        for k in range(a.shape[1]):
+            if not np.isfinite(a[i, k]):
+                return False
+    return True
+
+
 @kernel_factory
 def _assess(d, only):                   # literals: the (d, d) loops unrolled, one law's code
     def assess(U, Q, material, laws, params, rho, finite, J, lowest, speed):

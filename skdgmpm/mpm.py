@@ -29,6 +29,7 @@ from . import parallel, system
 from .bcs import Mixed, NormalVelocity, Transmissive
 from .errors import InputError
 from .gimp import SHAPES, Lattice, half_lengths, shape_functions
+from .health import with_momenta
 from .kernel_cache import kernel_factory, scratch
 from .scheme import GodunovScheme, ParticleState, stage
 
@@ -382,23 +383,10 @@ class MPM(GodunovScheme):
             getattr(self, name)(s)
         new = ParticleState(state.t + s.dt, system.join(s.F, self.particles.rho0[:, None] * s.v),
                             system.join(s.P, s.v), s.x, state.step + 1, history=s.history)
-        # the health of F and P came with the stress; it is the state's where p and v are finite
-        # (else the whole check again: the first bad point and its message)
-        finite = _all_finite(new.U[:, self.d * self.d:]) and _all_finite(s.v)
-        self.check(new, s.health if finite else None)
+        # the health of F and P came with the stress: the state's where p and v are finite too
+        self.check(new, with_momenta(s.health, new.U[:, self.d * self.d:], s.v))
         self.external_work += s.work + s.work_constraints
         return new
-
-
-@njit(cache=True, nogil=True)
-def _all_finite(a):
-    """Whether every entry of a (n, k) array (a strided view will do) is finite: one pass, no
-    temporaries."""
-    for i in range(a.shape[0]):
-        for k in range(a.shape[1]):
-            if not np.isfinite(a[i, k]):
-                return False
-    return True
 
 
 @njit(cache=True, nogil=True)

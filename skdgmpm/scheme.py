@@ -17,7 +17,7 @@ from . import system
 from .bcs import FREE, BoundaryGhosts
 from .errors import InputError, InstabilityError
 from .faces import boundary_faces
-from .health import assess
+from .health import assess, with_momenta
 from .riemann import godunov_fluxes, impedance, normal_flux
 
 
@@ -279,9 +279,7 @@ class GodunovScheme:
             P, state.history, *health = self.materials.stress_update(F, points.material, history,
                                                                       assess=self.initial_pass == "stress and health")
             state.Q = system.join(P, v)
-            # the health of F and P came with the stress: the state's where p and v are finite too
-            # (else the whole check: the first bad point and its message)
-            health = health[0] if health and np.isfinite(U[:, d * d:]).all() and np.isfinite(v).all() else None
+            health = with_momenta(health[0] if health else None, U[:, d * d:], np.asarray(v, dtype=float))
         self.check(state, health)
         return state
 

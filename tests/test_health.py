@@ -202,3 +202,26 @@ def test_the_fastest_wave_combines_as_numpys_max():
     assert summarise(starts, np.array([(-1, 1.0, 2.0, 5e3), (-1, 0.9, 3.0, 6e3)])) == (-1, 0.9, 2.0, 6e3)
     assert np.isnan(summarise(starts, np.array([(-1, 1.0, 2.0, np.nan), (-1, 0.9, 3.0, 6e3)]))[3])
     assert np.isnan(np.max([np.nan, 6e3]))
+
+
+def test_a_stress_pass_health_is_the_states_only_where_momenta_and_velocities_are_finite():
+    """`with_momenta`: the health that a stress pass computed of F and P stands for the state's
+    where p and v (which that pass does not read) are finite, in a strided view of U too; else None,
+    so that the whole check runs and names the bad point (the rule of MPM's step and of the initial
+    state, scheme.py)."""
+    from skdgmpm.health import with_momenta
+
+    health = object()
+    U, v = np.ones((7, 6)), np.ones((7, 2))
+    assert with_momenta(health, U[:, 4:], v) is health
+    assert with_momenta(None, U[:, 4:], v) is None
+    for bad in (np.nan, np.inf, -np.inf):
+        for where in ((6, 5), (0, 4)):
+            W = U.copy()
+            W[where] = bad
+            assert with_momenta(health, W[:, 4:], v) is None
+        w = v.copy()
+        w[3, 1] = bad
+        assert with_momenta(health, U[:, 4:], w) is None
+    U[0, 0] = np.nan                        # F's column: not the momenta's
+    assert with_momenta(health, U[:, 4:], v) is health
