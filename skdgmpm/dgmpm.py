@@ -216,22 +216,20 @@ class DGMPM(GodunovScheme):
             return super().at_rest(state, points)
         rec, rec_state = self._records()
         records = (rec, self.point_cell, self.cell_normals, rec_state)
-        no_motion = (state.x, np.zeros_like(state.U)[:, self.d * self.d:], 0.0)
-        U, gather = state.U, None
-        if self.rows_in_law_pass:
-            U, gather = np.empty(state.U.shape), self._rows_at_rest(state.U)
-        Q, history, health, _ = self.materials.update_and_assess(U, points.material, points.rho0, state.history,
-                                                                 no_motion, gather, records)
+        no_motion = (state.x, state.U[:, self.d * self.d:], 0.0)     # dt = 0: positions not moved (nor kept)
+        gather = self._rows_at_rest(state.U) if self.rows_in_law_pass else None   # rows U's: written onto U
+        Q, history, health, _ = self.materials.update_and_assess(state.U, points.material, points.rho0,
+                                                                 state.history, no_motion, gather, records)
         return Q, history, health
 
     def _rows_at_rest(self, U):
         """The particles' rows (`CellRows`) of a forward Euler stage that adds nothing to U, its
-        arrays typed as the step's (the same kernel): no fluxes, and a step of -0.0, since x + -0.0
-        is x for every x (-0.0 + +0.0 would be +0.0): each row is U's, bit for bit."""
-        (nf, nb), nc = (len(self.interior), len(self.boundary)), U.shape[1]
-        sides = 0 if self.ctu is None else 2            # `interface_flux`'s corrections
-        return CellRows(self.particles.cell, self.cell_faces, self.interior.measure, np.zeros((nf, nc)),
-                        np.zeros((nf, sides, nc)), 0.0, -0.0, self.inv_volume, U, np.zeros((nb, nc)))
+        arrays typed as the step's (the same kernel) and next to none held: each cell's faces all
+        boundary face 0, whose term is zero (no interior face, no flux), and a step of -0.0, since
+        x + -0.0 is x for every x (-0.0 + +0.0 would be +0.0): each row is U's, bit for bit."""
+        nc, sides = U.shape[1], 0 if self.ctu is None else 2       # `interface_flux`'s corrections
+        return CellRows(self.particles.cell, np.full(self.cell_faces.shape, -1, self.cell_faces.dtype), np.zeros(0),
+                        np.zeros((0, nc)), np.zeros((0, sides, nc)), 0.0, -0.0, self.inv_volume, U, np.zeros((1, nc)))
 
     def initial_state(self, F, v, t=0.0):
         state = super().initial_state(F, v, t)

@@ -120,13 +120,15 @@ def test_the_initial_state_takes_the_steps_law_pass_and_its_records(case, monkey
     """With one particle per cell the initial state comes from the step's own law pass
     (`DGMPM.at_rest`), which also writes the cell records that the first step's faces read: t = 0
     compiles neither the stand-alone stress pass and health check nor the record pass (each
-    patched to fail here). The reference is those stand-alone passes (`MaterialSet.stress_update`,
+    patched to fail here); it calls the step's law-pass kernel with the step's argument types (one
+    compiled signature). The reference is those stand-alone passes (`MaterialSet.stress_update`,
     `skdgmpm.health.assess`, `dgmpm_kernels.cell_records`), bit for bit: Q, the history, the wave
     speeds, the health, the records, and the first step against one whose records the record pass
     made. F and v hold -0.0 (and F != I, v != 0 elsewhere): the rows of the stage that adds
     nothing (`DGMPM._rows_at_rest`) are U's, bit for bit (with a step of +0.0, -0.0 came back +0.0).
     The case "linear-ctu": a law whose tangent does not depend on F."""
-    from skdgmpm import constitutive, system
+    import numba
+    from skdgmpm import constitutive, parallel, system
     from skdgmpm.dgmpm_kernels import cell_update
     from skdgmpm.health import assess
 
@@ -143,9 +145,17 @@ def test_the_initial_state_takes_the_steps_law_pass_and_its_records(case, monkey
     for target in ("skdgmpm.scheme.assess", "skdgmpm.dgmpm.cell_records"):
         monkeypatch.setattr(target, lambda *args, target=target: pytest.fail(target))
     monkeypatch.setattr(constitutive.MaterialSet, "stress_update", lambda *args, **kw: pytest.fail("stress pass"))
+    passes, chunked = [], parallel.chunked
+
+    def law_passes(n, kernel, spec, args, *rest):         # the law's passes: kernel and argument types
+        if kernel in constitutive._states.kernels.values():
+            passes.append((kernel, numba.typeof(args)))
+        return chunked(n, kernel, spec, args, *rest)
+    monkeypatch.setattr(parallel, "chunked", law_passes)
     state = st.initial_state(F, v)
     first = st.step(state)
     monkeypatch.undo()
+    assert len(passes) >= 2 and all(p == passes[0] for p in passes), passes   # one kernel, one signature
 
     P, history = st.materials.stress_update(F, st.particles.material, st.materials.initial_history(st.particles.material))
     np.testing.assert_array_equal(_bits(state.Q), _bits(system.join(P, v)))
