@@ -107,7 +107,8 @@ def test_records_of_the_constitutive_update_are_those_of_the_record_pass(case):
     assert again.t == other.t and np.array_equal(again.Q, other.Q)
 
 
-AT_REST = {**{k: CASES[k] for k in ("impact-ctu", "impact-dcu", "bar-1d", "elastoplastic-1d", "ring-body-force")},
+AT_REST = {**{k: CASES[k] for k in ("impact-ctu", "impact-dcu", "bar-1d", "elastoplastic-1d", "ring-body-force",
+                                    "gmsh-j2")},
            "linear-ctu": ("plate_impact_neohookean_2d", ["grid.cells=[12, 9]", 'material.law="linear_elastic"'])}
 
 
