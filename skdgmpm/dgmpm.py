@@ -215,12 +215,8 @@ class DGMPM(GodunovScheme):
         if not self.cellwise:
             return super().at_rest(state, points)
         rec, rec_state = self._records()
-        records = (rec, self.point_cell, self.cell_normals, rec_state)
-        no_motion = (state.x, state.U[:, self.d * self.d:], 0.0)     # dt = 0: positions not moved (nor kept)
         gather = self._rows_at_rest(state.U) if self.rows_in_law_pass else None   # rows U's: written onto U
-        Q, history, health, _ = self.materials.update_and_assess(state.U, points.material, points.rho0,
-                                                                 state.history, no_motion, gather, records)
-        return Q, history, health
+        return super().at_rest(state, points, gather, (rec, self.point_cell, self.cell_normals, rec_state))
 
     def _rows_at_rest(self, U):
         """The particles' rows (`CellRows`) of a forward Euler stage that adds nothing to U, its

@@ -272,7 +272,7 @@ class GodunovScheme:
         history = self.materials.initial_history(points.material)
         U = system.join(F, points.rho0[:, None] * v)
         state = ParticleState(t, U, None, points.X.copy(), history=history)
-        if self.initial_pass == "law":          # the step's `constitutive_update` pass (ADER-DGMPM)
+        if self.initial_pass == "law":          # the step's `constitutive_update` pass (ADER-DGMPM, DGMPM)
             state.Q, state.history, health = self.at_rest(state, points)
             state.Q[:, d * d:] = v              # v as given, not p / rho0 recomputed
         else:                                   # "stress"; "stress and health": MPM's step pass
@@ -283,14 +283,15 @@ class GodunovScheme:
         self.check(state, health)
         return state
 
-    def at_rest(self, state, points):
+    def at_rest(self, state, points, gather=None, records=None):
         """(Q, history updated, `Health`) of the state's U at ``points`` from the law's pass of
-        `constitutive_update` (`MaterialSet.update_and_assess`), its arguments typed as that pass
-        types them (the old velocities a column view of a Q; no motion): an initial state that
-        compiles no kernel of its own."""
-        no_motion = (state.x, np.zeros_like(state.U)[:, self.d * self.d:], 0.0)
+        `constitutive_update` (`MaterialSet.update_and_assess`, with its ``gather`` and
+        ``records``), its arguments typed as that pass types them: an initial state that compiles
+        no kernel of its own. No motion: Delta t = 0, the old velocities a column view (U's
+        momenta: read only into positions that are not kept)."""
+        no_motion = (state.x, state.U[:, self.d * self.d:], 0.0)
         Q, history, health, _ = self.materials.update_and_assess(state.U, points.material, points.rho0,
-                                                                 state.history, no_motion)
+                                                                 state.history, no_motion, gather, records)
         return Q, history, health
 
     def step_with_cfl_guard(self, state, dt_max, attempt):
