@@ -1,6 +1,6 @@
 """What a scene's first run compiles, and for how long (docs/bench/session38.md).
 
-    python bench/compile_times.py SCENE [--set KEY=VALUE ...] [--top 15] [--passes N]
+    python bench/compile_times.py SCENE [--set KEY=VALUE ...] [--top 15] [--passes N] [--helper]
 
 Runs ``skdgmpm run SCENE`` in this process on an empty kernel cache (a temporary
 NUMBA_CACHE_DIR, removed afterwards: the user's cache is neither read nor filled), every
@@ -9,7 +9,9 @@ compiles is inside the caller's time, one level deeper). Prints the run's start-
 kernels compiled at the top level, slowest first, each with numba's own split of it: its front
 end (typing, inlining, lowering to LLVM IR) and LLVM's optimisation and code generation; then
 the functions most often compiled inside them. The first run's notice says how long a scene
-compiles; this says where it goes. Timings are the machine's at hand, not test results.
+compiles; this says where it goes. The run's compile helper (`skdgmpm.compile_helper`) is off
+unless ``--helper``: then the list is what the run's own process still compiles. Timings are the
+machine's at hand, not test results.
 """
 import argparse
 import collections
@@ -82,7 +84,11 @@ def main():
     parser.add_argument("--top", type=int, default=15)
     parser.add_argument("--passes", type=int, default=0, metavar="N",
                         help="numba's slowest compiler passes of each of the N slowest kernels")
+    parser.add_argument("--helper", action="store_true",
+                        help="with the run's compile helper (skdgmpm.compile_helper): what the run's own process "
+                             "compiles while the helper compiles the step's face passes; without it, every kernel")
     args = parser.parse_args()
+    os.environ["SKDGMPM_COMPILE_HELPER"] = "1" if args.helper else "0"
     with tempfile.TemporaryDirectory() as work:
         config.CACHE_DIR = os.path.join(work, "cache")      # before the package's kernels are made
         from skdgmpm.cli import main as skdgmpm

@@ -11,15 +11,16 @@ from numba.core import event
 
 from .kernel_cache import cache_base, cache_dir, ours
 
-# CPU seconds to compile a scene's kernels from a cold cache, per method and dimension, on the
-# 2-core VM of docs/bench/session39.md to session43.md: bar_elastic_1d 11-16 s (dgmpm, one
-# particle per cell, its initial state from the step's own pass: session43.md §1; 20-23 s
-# before), 33 s (ader-dgfem), 19 s (mpm); plate_impact_neohookean_2d 22-31 s (dgmpm, one
-# particle per cell; 34-57 s before), standing_wave_2d 43-47 s (dgmpm, 2 x 2 particles per cell),
-# 29 s (ader-dgfem P1, session42.md), 28 s (mpm); multiholed_cell_j2_2d 43-44 s (ader-dgmpm,
-# Hencky J2); the others estimated alike. The notice says the last one measured on this machine
-# instead (<base>/compile_seconds.json) where there is one.
-EXPECTED_S = {"dgmpm": {1: 15, 2: 35}, "mpm": {1: 20, 2: 30}, "rk-dgfem": {1: 35, 2: 40},
+# Seconds to compile a scene's kernels from a cold cache, per method and dimension, on the
+# 2-core VM of docs/bench/session39.md to session44.md: bar_elastic_1d 7-8 s of start-up (dgmpm,
+# one particle per cell, its face passes compiled by a second process meanwhile,
+# `skdgmpm.compile_helper`: session44.md §1; 11-14 s alone), 33 s (ader-dgfem), 19 s (mpm);
+# plate_impact_neohookean_2d 12-13 s (dgmpm, one particle per cell; 22 s alone), the J2 plate and
+# partial_impact_2d 15 s (21-23 s alone), standing_wave_2d 37-47 s (dgmpm, 2 x 2 particles per
+# cell, no helper), 29 s (ader-dgfem P1, session42.md), 28 s (mpm); multiholed_cell_j2_2d 43-44 s
+# (ader-dgmpm, Hencky J2); the others estimated alike. The notice says the last one measured on
+# this machine instead (<base>/compile_seconds.json) where there is one.
+EXPECTED_S = {"dgmpm": {1: 10, 2: 20}, "mpm": {1: 20, 2: 30}, "rk-dgfem": {1: 35, 2: 40},
               "ader-dgfem": {1: 35, 2: 50}, "ader-dgmpm": {1: 35, 2: 45}}
 
 
@@ -42,11 +43,14 @@ class compile_notice(event.Listener):
     """A context manager around a run (re-enterable): within, the first time one of this
     package's kernels is compiled (the cache lacks it), print `NOTICE` "<method>, <d>D (first
     run, about N s; cached afterwards in <dir>)" on ``stream`` (stderr); nothing when every
-    kernel comes from the cache. ``seconds``: the CPU time spent compiling within, remembered as
-    the next estimate for this method and dimension."""
+    kernel comes from the cache. ``seconds``: the CPU time spent compiling within (and the time
+    the run waited for its compile helper, `skdgmpm.compile_helper`, added by the run), remembered
+    as the next estimate for this method and dimension. ``on_first``: called at that first
+    compilation (the run's compile helper starts); ``show`` False: only that, no line and no
+    estimate kept."""
 
-    def __init__(self, method, d, stream=None):
-        self.what, self.stream = f"{method}, {d}D", stream
+    def __init__(self, method, d, stream=None, on_first=None, show=True):
+        self.what, self.stream, self.on_first, self.show = f"{method}, {d}D", stream, on_first, show
         self.expected = EXPECTED_S.get(method, {}).get(d)
         self.shown, self.depth, self.seconds, self._start = False, 0, 0.0, 0.0
 
@@ -57,7 +61,7 @@ class compile_notice(event.Listener):
     def __exit__(self, *exc):
         event.unregister("numba:compile", self)
         self.depth = 0
-        if self.shown and self.seconds > 1:         # remember how long it took (best effort)
+        if self.shown and self.show and self.seconds > 1:       # remember how long it took (best effort)
             try:
                 measured = {**_measured(), self.what: round(self.seconds)}
                 with open(_measured_path(), "w") as f:
@@ -72,6 +76,10 @@ class compile_notice(event.Listener):
         self._start = time.process_time()
         if not self.shown and ours(ev):
             self.shown = True
+            if self.on_first is not None:
+                self.on_first()
+            if not self.show:
+                return
             expected = _measured().get(self.what, self.expected)
             about = f"about {expected} s; " if expected else ""
             from tqdm import tqdm               # clears a progress bar on the stream, then redraws it

@@ -12,8 +12,9 @@ from pathlib import Path
 import numpy as np
 from numba.core import event
 
-from . import checkpoint, guards, outdir, output, parallel, probes as gauges
+from . import checkpoint, compile_helper, guards, outdir, output, parallel, probes as gauges
 from .build import build
+from .compile_helper import CompileHelper
 from .errors import InputError, InstabilityError, OutputError
 from .exact import relative_errors
 from .first_run import compile_notice
@@ -214,15 +215,26 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
         out = Path(out)
         outdir.check(out, force, resume=saved is not None)
     begin = time.perf_counter()
-    notice = (compile_notice(scene.get("method.name", "dgmpm"), scene.dim)
-              if (progress if notice is None else notice) else nullcontext())
-    with notice:                          # a line on stderr if the kernels are not in the cache
-        disc = build(scene)
-    if steps is not None:                 # the end time of that many first time steps [L23 eq 67]
-        scene, t_end = _end_of_steps(scene, disc, steps)
-    solution = exact_solution(scene)
-    check_cfl(disc)
-    guards.check_step_count(disc, t_end)
+    show = progress if notice is None else notice
+    # on the first compilation, a second process compiles the step's face passes meanwhile
+    helper = CompileHelper(scene) if saved is None and compile_helper.wanted(scene) else None
+    notice = (compile_notice(scene.get("method.name", "dgmpm"), scene.dim, on_first=helper and helper.start,
+                             show=show) if show or helper else nullcontext())
+    try:
+        with notice:                      # a line on stderr if the kernels are not in the cache
+            disc = build(scene)
+        if steps is not None:             # the end time of that many first time steps [L23 eq 67]
+            scene, t_end = _end_of_steps(scene, disc, steps)
+        solution = exact_solution(scene)
+        check_cfl(disc)
+        guards.check_step_count(disc, t_end)
+        if helper is not None:            # its kernels into the cache before the first step
+            helper.join()
+            if hasattr(notice, "seconds"):
+                notice.seconds += helper.waited
+    finally:
+        if helper is not None:
+            helper.close()
     stepper, state = disc.stepper, disc.initial
     fields = output.frame_fields(scene, stepper)
     probes = gauges.from_scene(scene, disc)

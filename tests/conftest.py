@@ -9,11 +9,19 @@ import io
 
 import pytest
 
-from skdgmpm import first_run
+from skdgmpm import compile_helper, first_run
 from skdgmpm import run as run_module
 
 
 @pytest.fixture(autouse=True)
 def silent_compile_notice(monkeypatch):
     monkeypatch.setattr(run_module, "compile_notice",
-                        lambda method, d: first_run.compile_notice(method, d, stream=io.StringIO()))
+                        lambda method, d, **kw: first_run.compile_notice(method, d, stream=io.StringIO(), **kw))
+
+
+@pytest.fixture(autouse=True)
+def no_compile_helper(monkeypatch):
+    """A run compiles in its own process only (`skdgmpm.compile_helper` is tested where asked):
+    which test compiles first depends on the order and the cache, and a second process each time
+    would make the suite's time depend on them too."""
+    monkeypatch.setenv(compile_helper.ENV, "0")

@@ -222,7 +222,7 @@ def test_quiet_run_still_says_when_it_compiles(tmp_path, monkeypatch, capsys):
     from skdgmpm.cli import main
 
     asked = []
-    monkeypatch.setattr(run_module, "compile_notice", lambda method, d: asked.append((method, d)) or nullcontext())
+    monkeypatch.setattr(run_module, "compile_notice", lambda method, d, **kw: asked.append((method, d)) or nullcontext())
     monkeypatch.chdir(tmp_path)
     assert main(["run", "bar_elastic_1d", "--set", "run.t_end=1e-4", "--quiet"]) == 0
     assert asked == [("dgmpm", 1)]

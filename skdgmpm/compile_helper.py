@@ -1,0 +1,206 @@
+"""A first run's kernels compiled on two cores: while this process compiles the law's pass of a
+DGMPM scene (its initial state takes it, `GodunovScheme.at_rest`), a second process compiles the
+step's face passes, which this one then loads from the cache instead of compiling them itself
+(numba compiles under one lock a process: two processes are the only way to use a second core).
+
+The second process (``python -m skdgmpm.compile_helper SCENE.json``) builds the same scene and
+steps it once on a placeholder state (no law evaluated, nothing checked), stopping where the
+step's law pass would begin: every kernel the step calls before it is compiled, with the
+argument types the real step gives them. It files them in a cache folder of its own (a temporary
+$NUMBA_CACHE_DIR: two processes never write one index file), and this one copies the functions
+its own cache lacks into it before its first step (`CompileHelper.join`); a function both
+compiled keeps this process's files. A helper that fails, or is not done within
+`CompileHelper.TIMEOUT_S`, costs nothing but its time: this process compiles what it lacks.
+
+Started on this process's first compilation of one of the package's kernels in a run
+(`skdgmpm.first_run.compile_notice`), where `wanted`: DGMPM with one particle per cell and
+forward Euler, two cores free to this process, $SKDGMPM_COMPILE_HELPER not 0. On a cache that
+holds the face passes already (another scene of the same kind ran, with a new law), the helper
+was not needed and the run waits for it all the same, up to its first step. No compiled code
+here: this module is not part of the kernels' cache key.
+"""
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+METHODS = ("dgmpm",)            # methods whose step runs its face passes before the law's pass
+ENV = "SKDGMPM_COMPILE_HELPER"
+MAX_POINTS = 2 ** 20            # a larger scene compiles alone: the helper's set-up would double its memory
+MAX_MESH_BYTES = 64 * 2 ** 20   # the same for a mesh file, by its size (its cells unknown before it is read)
+
+
+def wanted(scene):
+    """Whether a run of ``scene`` should start a helper on its first compilation: a DGMPM scene
+    with one particle per cell and forward Euler (its initial state compiles the step's law pass,
+    the helper the rest: two halves; with several particles in a cell, or RK2, the step compiles
+    its law's pass after the face passes and the helper's share is most of it), of `MAX_POINTS`
+    particles or fewer (a mesh file of `MAX_MESH_BYTES` or less), two cores free to this
+    process, $SKDGMPM_COMPILE_HELPER not 0."""
+    if os.environ.get(ENV, "1") == "0" or scene.get("method.name", "dgmpm") not in METHODS:
+        return False
+    per_cell = scene.get("particles.per_cell", 1)
+    one = per_cell == 1 or isinstance(per_cell, list) and len(per_cell) == 1
+    if not one or scene.get("particles.file") is not None or scene.get("method.integrator", "euler") != "euler":
+        return False
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:
+        cores = os.cpu_count() or 1
+    return cores >= 2 and _small(scene)
+
+
+def _small(scene):
+    try:
+        mesh = scene.get("grid.mesh")
+        if mesh is not None:
+            return os.path.getsize(scene.resolve(mesh)) <= MAX_MESH_BYTES
+        return float(np.prod(np.asarray(scene.get("grid.cells"), dtype=float))) <= MAX_POINTS
+    except (OSError, TypeError, ValueError):    # the build says what is wrong
+        return False
+
+
+class CompileHelper:
+    """The second process of one run: `start` (idempotent), `join` before the first step, `close`
+    in every case (kills it if still running, removes its folder; a `start` after it starts
+    nothing: a compilation later in the run, in its steps, has no first step left to help)."""
+
+    TIMEOUT_S = 300
+
+    def __init__(self, scene):
+        self.scene, self.process, self.folder, self.closed = scene, None, None, False
+        self.waited = 0.0               # seconds `join` waited for it
+        self.merged = []                # the index files copied into this process's cache
+
+    def start(self):
+        if self.process is not None or self.closed:
+            return
+        from .kernel_cache import cache_dir
+        try:
+            os.makedirs(cache_dir(), exist_ok=True)
+            self.folder = tempfile.mkdtemp(prefix="skdgmpm-helper-")
+            spec = os.path.join(self.folder, "scene.json")
+            with open(spec, "w") as f:
+                json.dump({"name": self.scene.name, "data": self.scene.data,
+                           "path": None if self.scene.path is None else str(self.scene.path)}, f)
+            env = {**os.environ, "NUMBA_CACHE_DIR": os.path.join(self.folder, "cache"), ENV: "0"}
+            self.process = subprocess.Popen([sys.executable, "-m", __name__, spec], env=env,
+                                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                            stderr=subprocess.DEVNULL)
+        except (OSError, TypeError, ValueError):       # no helper: this process compiles all
+            self.close()
+
+    def join(self):
+        """Wait for the helper (up to `TIMEOUT_S`), then copy its kernels that this process's
+        cache lacks into it; the helper's folder is removed. Returns the index files copied."""
+        if self.process is None:
+            return []
+        from .kernel_cache import cache_dir
+        t0 = time.perf_counter()
+        try:
+            code = self.process.wait(timeout=self.TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            code = None
+        self.waited = time.perf_counter() - t0
+        if code is not None:            # ended on its own (whatever it reached): its files are whole
+            target = cache_dir()
+            self.merged = merge(os.path.join(self.folder, "cache", os.path.basename(target)), target)
+        self.close()
+        return self.merged
+
+    def close(self):
+        self.closed = True
+        if self.process is not None and self.process.poll() is None:
+            self.process.kill()
+            self.process.wait()
+        self.process = None
+        if self.folder is not None:
+            shutil.rmtree(self.folder, ignore_errors=True)
+            self.folder = None
+
+
+def merge(source, target):
+    """Copy each compiled function of the cache folder ``source`` (its index file ``*.nbi`` and
+    data files ``*.<n>.nbc``, in the package folders below it) into ``target`` where ``target``
+    has no index of that function; the data first, each file under a temporary name then renamed,
+    so that a reader never sees an index without its data. Returns the index files copied."""
+    copied = []
+    for folder, _, names in os.walk(source):
+        into = os.path.join(target, os.path.relpath(folder, source))
+        for index in sorted(n for n in names if n.endswith(".nbi")):
+            if os.path.exists(os.path.join(into, index)):
+                continue                # this process compiled that function too: its own files
+            stem = index[:-len(".nbi")]
+            data = [n for n in names if n.startswith(stem + ".") and n.endswith(".nbc")]
+            try:
+                os.makedirs(into, exist_ok=True)
+                for name in data + [index]:
+                    part = os.path.join(into, f".{name}.{os.getpid()}.part")
+                    shutil.copyfile(os.path.join(folder, name), part)
+                    os.replace(part, os.path.join(into, name))
+            except OSError:
+                continue
+            copied.append(os.path.join(into, index))
+    return copied
+
+
+class _LawPass(Exception):
+    """Raised where the placeholder step reaches the law's pass: the helper's work ends there."""
+
+
+def compile_step(scene):
+    """Build ``scene`` and step it once on a placeholder initial state, up to the law's pass: the
+    kernels of what comes before it compiled (and cached) with the real step's argument types.
+    For the helper process only: it replaces the schemes' initial state, checks and law pass.
+    Returns whether the step reached the law's pass."""
+    import numpy as np
+
+    from . import dgmpm, system
+    from .build import build
+    from .scheme import GodunovScheme, ParticleState
+
+    # placeholder numbers: finite, none zero (a compiled division by zero raises and would end
+    # the step before its later passes compile); U is the scene's own
+    fill = np.random.default_rng(0).uniform
+
+    def initial_state(self, F, v, t=0.0):
+        points = self.particles
+        U = system.join(F, points.rho0[:, None] * v)
+        n = len(U)
+        return ParticleState(t, U, fill(0.5, 1.5, U.shape), points.X.copy(), speed=np.ones(n), fastest=1.0,
+                             health={}, history=self.materials.initial_history(points.material))
+
+    def constitutive_update(self, *args, **kwargs):
+        raise _LawPass
+
+    GodunovScheme.initial_state = initial_state
+    GodunovScheme.constitutive_update = constitutive_update
+    dgmpm._not_hyperbolic = lambda face: None       # placeholder states need not be hyperbolic
+    disc = build(scene)
+    for records in disc.stepper._records()[0]:      # DGMPM's cell records (those of Q written by its initial state)
+        records[...] = fill(0.5, 1.5, records.shape)
+    try:
+        disc.stepper.step(disc.initial)
+    except _LawPass:
+        return True
+    return False
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    with open(argv[0]) as f:
+        spec = json.load(f)
+    from pathlib import Path
+
+    from .scene import Scene
+    scene = Scene.from_dict(spec["data"], spec["name"], None if spec["path"] is None else Path(spec["path"]))
+    sys.exit(0 if compile_step(scene) else 1)
+
+
+if __name__ == "__main__":
+    main()

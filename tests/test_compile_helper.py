@@ -1,0 +1,117 @@
+"""A first run's second process (`skdgmpm.compile_helper`): it compiles a DGMPM scene's face passes
+while the run compiles its law's pass, and the run loads them from its cache instead of compiling
+them; only functions the cache lacks are copied into it, each whole."""
+import os
+import subprocess
+import sys
+
+import meshio
+import numpy as np
+import pytest
+
+from skdgmpm import compile_helper
+from skdgmpm.run import run
+from skdgmpm.scene import load_scene
+
+
+def write(path, text):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(text)
+
+
+def test_merge_copies_the_functions_the_cache_lacks_and_keeps_its_own(tmp_path):
+    source, target = tmp_path / "helper" / "kernels-x", tmp_path / "mine" / "kernels-x"
+    write(source / "skdgmpm" / "m.f-10.py311.nbi", b"index f")
+    write(source / "skdgmpm" / "m.f-10.py311.1.nbc", b"f 1")
+    write(source / "skdgmpm" / "m.f-10.py311.2.nbc", b"f 2")
+    write(source / "skdgmpm" / "m.f-100.py311.1.nbc", b"another function's")       # not f's data
+    write(source / "skdgmpm.materials" / "law.g-5.py311.nbi", b"index g")
+    write(source / "skdgmpm.materials" / "law.g-5.py311.1.nbc", b"g 1 (helper)")
+    write(target / "skdgmpm.materials" / "law.g-5.py311.nbi", b"my index g")
+    write(target / "skdgmpm.materials" / "law.g-5.py311.1.nbc", b"g 1 (mine)")
+    copied = compile_helper.merge(str(source), str(target))
+    assert copied == [str(target / "skdgmpm" / "m.f-10.py311.nbi")]
+    assert sorted(os.listdir(target / "skdgmpm")) == ["m.f-10.py311.1.nbc", "m.f-10.py311.2.nbc", "m.f-10.py311.nbi"]
+    for name in os.listdir(target / "skdgmpm"):
+        assert (target / "skdgmpm" / name).read_bytes() == (source / "skdgmpm" / name).read_bytes()
+    assert (target / "skdgmpm.materials" / "law.g-5.py311.nbi").read_bytes() == b"my index g"
+    assert (target / "skdgmpm.materials" / "law.g-5.py311.1.nbc").read_bytes() == b"g 1 (mine)"
+    assert compile_helper.merge(str(source), str(target)) == []               # nothing left to copy
+
+
+def test_dgmpm_runs_of_one_particle_per_cell_and_euler_on_two_cores_take_a_helper(monkeypatch):
+    """Where the initial state compiles the step's law pass and the helper the rest (with several
+    particles in a cell, or RK2, the step compiles its law's pass after the face passes: the
+    helper would do most of the work, measured 35.8 against 37.1 s for standing_wave_2d)."""
+    monkeypatch.setenv(compile_helper.ENV, "1")
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    assert compile_helper.wanted(load_scene("bar_elastic_1d"))
+    assert compile_helper.wanted(load_scene("bar_elastic_1d").with_overrides(["particles.per_cell=[0.25]"]))
+    for other in ("method.name=mpm", "method.name=ader-dgmpm", "method.integrator=rk2", "particles.per_cell=2",
+                  "particles.per_cell=[0.25, 0.75]"):
+        assert not compile_helper.wanted(load_scene("bar_elastic_1d").with_overrides([other])), other
+    assert not compile_helper.wanted(load_scene("standing_wave_2d"))
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0})
+    assert not compile_helper.wanted(load_scene("bar_elastic_1d"))
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    monkeypatch.setenv(compile_helper.ENV, "0")
+    assert not compile_helper.wanted(load_scene("bar_elastic_1d"))
+
+
+def face_passes(lines, verb):
+    """The face passes' kernels named in numba's cache log lines ``[cache] data <verb> ...``."""
+    return {kernel for line in lines if line.startswith(f"[cache] data {verb}")
+            for kernel in ("interior_pass", "boundary_faces", "boundary_terms") if f"_{kernel}." in line}
+
+
+@pytest.mark.skipif(len(getattr(os, "sched_getaffinity", lambda pid: {0})(0)) < 2, reason="one core")
+def test_a_cold_first_run_loads_the_face_passes_its_helper_compiled(tmp_path):
+    """A first run on an empty cache: its own process saves the law's pass and loads the face
+    passes (numba's cache log, which the helper's process does not write here), and its answers
+    are those of this process's kernels, compiled alone, bit for bit (the same code compiled)."""
+    (tmp_path / "tmp").mkdir()
+    env = {**os.environ, compile_helper.ENV: "1", "NUMBA_CACHE_DIR": str(tmp_path / "cache"),
+           "NUMBA_DEBUG_CACHE": "1", "TMPDIR": str(tmp_path / "tmp")}
+    done = subprocess.run([sys.executable, "-m", "skdgmpm.cli", "run", "bar_elastic_1d", "--out", str(tmp_path / "out"),
+                           "--quiet"], env=env, cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    lines = done.stdout.splitlines() + done.stderr.splitlines()
+    assert face_passes(lines, "loaded") == {"interior_pass", "boundary_faces", "boundary_terms"}
+    assert face_passes(lines, "saved") == set()
+    assert any(line.startswith("[cache] data saved") and "_states." in line for line in lines)
+    assert done.stderr.count("compiling kernels for dgmpm, 1D") == 1
+    assert os.listdir(tmp_path / "tmp") == []                  # the helper's folder removed
+
+    alone = run("bar_elastic_1d", out=tmp_path / "alone", progress=False)
+    assert alone.status == "ok"
+    last = sorted((tmp_path / "out").glob("particles_*.vtu"))[-1]
+    here, there = meshio.read(tmp_path / "alone" / last.name), meshio.read(last)
+    assert set(here.point_data) == set(there.point_data)
+    for name, values in here.point_data.items():
+        assert np.array_equal(values.view(np.uint8), there.point_data[name].view(np.uint8)), name
+
+
+def test_a_scene_too_large_for_two_set_ups_compiles_alone(monkeypatch):
+    """The helper builds the whole scene too: above `MAX_POINTS` particles (or a mesh file above
+    `MAX_MESH_BYTES`) the run compiles in its own process, its memory not doubled."""
+    monkeypatch.setenv(compile_helper.ENV, "1")
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    plate = load_scene("plate_impact_neohookean_2d")
+    assert compile_helper.wanted(plate.with_overrides(["grid.cells=[1024, 1024]"]))
+    assert not compile_helper.wanted(plate.with_overrides(["grid.cells=[1024, 1025]"]))
+    partial = load_scene("partial_impact_2d")                 # a gmsh file
+    assert compile_helper.wanted(partial)
+    monkeypatch.setattr(compile_helper, "MAX_MESH_BYTES", 1000)
+    assert not compile_helper.wanted(partial)
+
+
+def test_a_helper_closed_before_it_started_starts_nothing(tmp_path, monkeypatch):
+    """A run closes its helper before its steps: a compilation in a step (a first chunk loop on a
+    larger grid) must not start a process that nothing would wait for or remove."""
+    started = []
+    monkeypatch.setattr(compile_helper.subprocess, "Popen", lambda *a, **k: started.append(a))
+    helper = compile_helper.CompileHelper(load_scene("bar_elastic_1d"))
+    assert helper.join() == [] and helper.waited == 0.0
+    helper.close()
+    helper.start()
+    assert started == [] and helper.process is None and helper.folder is None
