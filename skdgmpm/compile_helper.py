@@ -9,15 +9,16 @@ step's law pass would begin: every kernel the step calls before it is compiled, 
 argument types the real step gives them. It files them in a cache folder of its own (a temporary
 $NUMBA_CACHE_DIR: two processes never write one index file), and this one copies the functions
 its own cache lacks into it before its first step (`CompileHelper.join`); a function both
-compiled keeps this process's files. A helper that fails, or is not done within
+compiled keeps this process's files. The helper's folder starts as links to this process's
+cache (`mirror`): it loads what that holds and compiles only what it lacks. A helper that fails, or is not done within
 `CompileHelper.TIMEOUT_S`, costs nothing but its time: this process compiles what it lacks.
 
 Started on this process's first compilation of one of the package's kernels in a run
 (`skdgmpm.first_run.compile_notice`), where `wanted`: DGMPM with one particle per cell and
 forward Euler, two cores free to this process, $SKDGMPM_COMPILE_HELPER not 0. On a cache that
 holds the face passes already (another scene of the same kind ran, with a new law), the helper
-was not needed and the run waits for it all the same, up to its first step. No compiled code
-here: this module is not part of the kernels' cache key.
+loads them and is done in its start-up (1-2 s, while this process compiles its law's pass). No
+compiled code here: this module is not part of the kernels' cache key.
 """
 import json
 import os
@@ -75,7 +76,8 @@ class CompileHelper:
     def __init__(self, scene):
         self.scene, self.process, self.folder, self.closed = scene, None, None, False
         self.waited = 0.0               # seconds `join` waited for it
-        self.merged = []                # the index files copied into this process's cache
+        self.compiled = []              # the index files it wrote (the functions it compiled)
+        self.merged = []                # those copied into this process's cache
 
     def start(self):
         if self.process is not None or self.closed:
@@ -84,6 +86,7 @@ class CompileHelper:
         try:
             os.makedirs(cache_dir(), exist_ok=True)
             self.folder = tempfile.mkdtemp(prefix="skdgmpm-helper-")
+            mirror(cache_dir(), os.path.join(self.folder, "cache", os.path.basename(cache_dir())))
             spec = os.path.join(self.folder, "scene.json")
             with open(spec, "w") as f:
                 json.dump({"name": self.scene.name, "data": self.scene.data,
@@ -109,7 +112,11 @@ class CompileHelper:
         self.waited = time.perf_counter() - t0
         if code is not None:            # ended on its own (whatever it reached): its files are whole
             target = cache_dir()
-            self.merged = merge(os.path.join(self.folder, "cache", os.path.basename(target)), target)
+            source = os.path.join(self.folder, "cache", os.path.basename(target))
+            self.compiled = sorted(os.path.relpath(os.path.join(folder, n), source)
+                                   for folder, _, names in os.walk(source) for n in names
+                                   if n.endswith(".nbi") and not os.path.islink(os.path.join(folder, n)))
+            self.merged = merge(source, target)
         self.close()
         return self.merged
 
@@ -124,6 +131,19 @@ class CompileHelper:
             self.folder = None
 
 
+def mirror(source, target):
+    """``target``: the cache folder ``source`` as it is now, each of its files a symbolic link,
+    for the helper to load what the run's cache holds (it compiles only what that lacks, and
+    then is soon done). numba writes an index or data file by renaming a new file onto its
+    path, which replaces a link, never the file it points to: ``source`` is only read."""
+    for folder, _, names in os.walk(source):
+        into = os.path.join(target, os.path.relpath(folder, source))
+        os.makedirs(into, exist_ok=True)
+        for name in names:
+            if name.endswith((".nbi", ".nbc")):
+                os.symlink(os.path.join(folder, name), os.path.join(into, name))
+
+
 def merge(source, target):
     """Copy each compiled function of the cache folder ``source`` (its index file ``*.nbi`` and
     data files ``*.<n>.nbc``, in the package folders below it) into ``target`` where ``target``
@@ -133,8 +153,8 @@ def merge(source, target):
     for folder, _, names in os.walk(source):
         into = os.path.join(target, os.path.relpath(folder, source))
         for index in sorted(n for n in names if n.endswith(".nbi")):
-            if os.path.exists(os.path.join(into, index)):
-                continue                # this process compiled that function too: its own files
+            if os.path.islink(os.path.join(folder, index)) or os.path.exists(os.path.join(into, index)):
+                continue                # this process's own (`mirror`), or it compiled that function too
             stem = index[:-len(".nbi")]
             data = [n for n in names if n.startswith(stem + ".") and n.endswith(".nbc")]
             try:

@@ -29,6 +29,8 @@ def test_merge_copies_the_functions_the_cache_lacks_and_keeps_its_own(tmp_path):
     write(source / "skdgmpm.materials" / "law.g-5.py311.1.nbc", b"g 1 (helper)")
     write(target / "skdgmpm.materials" / "law.g-5.py311.nbi", b"my index g")
     write(target / "skdgmpm.materials" / "law.g-5.py311.1.nbc", b"g 1 (mine)")
+    write(tmp_path / "elsewhere" / "m.h-7.py311.nbi", b"index h")       # a link of `mirror`'s: not copied
+    (source / "skdgmpm" / "m.h-7.py311.nbi").symlink_to(tmp_path / "elsewhere" / "m.h-7.py311.nbi")
     copied = compile_helper.merge(str(source), str(target))
     assert copied == [str(target / "skdgmpm" / "m.f-10.py311.nbi")]
     assert sorted(os.listdir(target / "skdgmpm")) == ["m.f-10.py311.1.nbc", "m.f-10.py311.2.nbc", "m.f-10.py311.nbi"]
@@ -115,3 +117,36 @@ def test_a_helper_closed_before_it_started_starts_nothing(tmp_path, monkeypatch)
     helper.close()
     helper.start()
     assert started == [] and helper.process is None and helper.folder is None
+
+
+def test_the_mirror_is_read_only_to_numbas_writes(tmp_path):
+    """The helper starts from links to the run's cache: numba writes an index or data file by
+    renaming a new file onto its path (`numba.core.caching`), which replaces the link alone."""
+    mine, theirs = tmp_path / "mine", tmp_path / "theirs"
+    write(mine / "skdgmpm" / "m.f-10.py311.nbi", b"my index")
+    write(mine / "skdgmpm" / "m.f-10.py311.1.nbc", b"my data")
+    write(mine / "skdgmpm" / "notes.txt", b"not numba's")
+    compile_helper.mirror(str(mine), str(theirs))
+    assert sorted(os.listdir(theirs / "skdgmpm")) == ["m.f-10.py311.1.nbc", "m.f-10.py311.nbi"]
+    assert (theirs / "skdgmpm" / "m.f-10.py311.nbi").is_symlink()
+    assert (theirs / "skdgmpm" / "m.f-10.py311.nbi").read_bytes() == b"my index"
+    write(theirs / "skdgmpm" / "new", b"their index")
+    os.replace(theirs / "skdgmpm" / "new", theirs / "skdgmpm" / "m.f-10.py311.nbi")
+    assert (mine / "skdgmpm" / "m.f-10.py311.nbi").read_bytes() == b"my index"
+    assert compile_helper.merge(str(theirs), str(mine)) == []           # the run has that function
+
+
+def test_on_a_cache_that_holds_the_step_the_helper_compiles_nothing(tmp_path, monkeypatch):
+    """Another scene of the kind ran: the helper loads the face passes from the run's cache
+    through its mirror, compiles no function and copies none."""
+    monkeypatch.setenv(compile_helper.ENV, "1")
+    scene = load_scene("bar_elastic_1d")
+    assert run(scene, max_steps=1, progress=False).status in ("ok", "stopped")    # the cache holds its step
+    helper = compile_helper.CompileHelper(scene)
+    try:
+        helper.start()
+        assert helper.process is not None
+        helper.join()
+    finally:
+        helper.close()
+    assert helper.compiled == [] and helper.merged == []
