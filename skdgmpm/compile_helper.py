@@ -20,6 +20,7 @@ holds the face passes already (another scene of the same kind ran, with a new la
 loads them and is done in its start-up (1-2 s, while this process compiles its law's pass). No
 compiled code here: this module is not part of the kernels' cache key.
 """
+import contextlib
 import json
 import os
 import shutil
@@ -148,7 +149,31 @@ def merge(source, target):
     """Copy each compiled function of the cache folder ``source`` (its index file ``*.nbi`` and
     data files ``*.<n>.nbc``, in the package folders below it) into ``target`` where ``target``
     has no index of that function; the data first, each file under a temporary name then renamed,
-    so that a reader never sees an index without its data. Returns the index files copied."""
+    so that a reader never sees an index without its data; under a lock of ``target``'s, so that
+    two runs' merges never interleave (a copy of one helper's data under another's index would
+    pair a key with another signature's code). Returns the index files copied."""
+    with _locked(target):
+        return _merge(source, target)
+
+
+@contextlib.contextmanager
+def _locked(folder):
+    """An exclusive lock of ``folder`` (its file .merge.lock) for the block, where fcntl is."""
+    try:
+        import fcntl
+    except ImportError:
+        yield
+        return
+    os.makedirs(folder, exist_ok=True)
+    with open(os.path.join(folder, ".merge.lock"), "a") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def _merge(source, target):
     copied = []
     for folder, _, names in os.walk(source):
         into = os.path.join(target, os.path.relpath(folder, source))

@@ -150,3 +150,30 @@ def test_on_a_cache_that_holds_the_step_the_helper_compiles_nothing(tmp_path, mo
     finally:
         helper.close()
     assert helper.compiled == [] and helper.merged == []
+
+
+def test_two_merges_into_one_cache_never_interleave(tmp_path):
+    """Runs side by side: a merge waits while another holds the cache folder's lock."""
+    import threading
+
+    source, target = tmp_path / "helper" / "kernels-x", tmp_path / "mine" / "kernels-x"
+    write(source / "skdgmpm" / "m.f-10.py311.nbi", b"index f")
+    write(source / "skdgmpm" / "m.f-10.py311.1.nbc", b"f 1")
+    copied, held, release = [], threading.Event(), threading.Event()
+
+    def other_merge():
+        with compile_helper._locked(str(target)):
+            held.set()
+            release.wait(10)
+
+    other = threading.Thread(target=other_merge)
+    other.start()
+    held.wait(10)
+    mine = threading.Thread(target=lambda: copied.extend(compile_helper.merge(str(source), str(target))))
+    mine.start()
+    mine.join(0.3)
+    assert mine.is_alive() and not (target / "skdgmpm").exists()        # waiting for the lock
+    release.set()
+    other.join()
+    mine.join(10)
+    assert copied == [str(target / "skdgmpm" / "m.f-10.py311.nbi")]
