@@ -1,24 +1,25 @@
-"""A first run's kernels compiled on two cores: while this process compiles the law's pass of a
-DGMPM scene (its initial state takes it, `GodunovScheme.at_rest`), a second process compiles the
-step's face passes, which this one then loads from the cache instead of compiling them itself
-(numba compiles under one lock a process: two processes are the only way to use a second core).
+"""A first run's kernels compiled on two cores: while this process compiles the law's pass for
+its initial state (the step's own: `GodunovScheme.at_rest`, MPM's stress pass), a second process
+compiles the rest of the step (DGMPM's face passes, ADER's predictor and fluxes, MPM's transfers),
+which this one then loads from the cache instead of compiling it (numba compiles under one lock a
+process: two processes are the only way to use a second core).
 
 The second process (``python -m skdgmpm.compile_helper SCENE.json``) builds the same scene and
 steps it once on a placeholder state (no law evaluated, nothing checked), stopping where the
-step's law pass would begin: every kernel the step calls before it is compiled, with the
-argument types the real step gives them. It files them in a cache folder of its own (a temporary
-$NUMBA_CACHE_DIR: two processes never write one index file), and this one copies the functions
-its own cache lacks into it before its first step (`CompileHelper.join`); a function both
-compiled keeps this process's files. The helper's folder starts as links to this process's
-cache (`mirror`): it loads what that holds and compiles only what it lacks. A helper that fails, or is not done within
-`CompileHelper.TIMEOUT_S`, costs nothing but its time: this process compiles what it lacks.
+step's law pass would begin (`compile_step`): every kernel the step calls before it is compiled,
+with the argument types the real step gives them. It files them in a cache folder of its own (a
+temporary $NUMBA_CACHE_DIR: two processes never write one index file), and this one copies the
+functions its own cache lacks into it before its first step (`CompileHelper.join`); a function
+both compiled keeps this process's files. The helper's folder starts as links to this process's
+cache (`mirror`): it loads what that holds and compiles only what it lacks. A helper that fails,
+or is not done within `CompileHelper.TIMEOUT_S`, costs nothing but its time: this process
+compiles what it lacks.
 
 Started on this process's first compilation of one of the package's kernels in a run
-(`skdgmpm.first_run.compile_notice`), where `wanted`: DGMPM with one particle per cell and
-forward Euler, two cores free to this process, $SKDGMPM_COMPILE_HELPER not 0. On a cache that
-holds the face passes already (another scene of the same kind ran, with a new law), the helper
-loads them and is done in its start-up (1-2 s, while this process compiles its law's pass). No
-compiled code here: this module is not part of the kernels' cache key.
+(`skdgmpm.first_run.compile_notice`), where `wanted`. On a cache that holds the rest of the
+step already (another scene of the same kind ran, with a new law), the helper loads it and is
+done in its start-up, while this process compiles its law's pass. No compiled code here: this
+module is not part of the kernels' cache key.
 """
 import contextlib
 import json
@@ -31,38 +32,41 @@ import time
 
 import numpy as np
 
-METHODS = ("dgmpm",)            # methods whose step runs its face passes before the law's pass
+METHODS = ("dgmpm", "ader-dgmpm", "ader-dgfem", "rk-dgfem", "mpm")     # their initial state: the step's law pass
 ENV = "SKDGMPM_COMPILE_HELPER"
 MAX_POINTS = 2 ** 20            # a larger scene compiles alone: the helper's set-up would double its memory
 MAX_MESH_BYTES = 64 * 2 ** 20   # the same for a mesh file, by its size (its cells unknown before it is read)
 
 
 def wanted(scene):
-    """Whether a run of ``scene`` should start a helper on its first compilation: a DGMPM scene
-    with one particle per cell and forward Euler (its initial state compiles the step's law pass,
-    the helper the rest: two halves; with several particles in a cell, or RK2, the step compiles
-    its law's pass after the face passes and the helper's share is most of it), of `MAX_POINTS`
-    particles or fewer (a mesh file of `MAX_MESH_BYTES` or less), two cores free to this
-    process, $SKDGMPM_COMPILE_HELPER not 0."""
-    if os.environ.get(ENV, "1") == "0" or scene.get("method.name", "dgmpm") not in METHODS:
+    """Whether a run of ``scene`` should start a helper on its first compilation: a method whose
+    initial state compiles the step's own law pass before the step compiles the rest (`METHODS`;
+    DGMPM with one particle per cell and forward Euler: with several particles in a cell, or
+    RK2, its step compiles its law's pass after the face passes and the helper's share would be
+    most of the work), of `MAX_POINTS` particles or fewer (a mesh file of `MAX_MESH_BYTES` or
+    less), two cores free to this process, $SKDGMPM_COMPILE_HELPER not 0."""
+    method = scene.get("method.name", "dgmpm")
+    if os.environ.get(ENV, "1") == "0" or method not in METHODS:
         return False
     per_cell = scene.get("particles.per_cell", 1)
     one = per_cell == 1 or isinstance(per_cell, list) and len(per_cell) == 1
-    if not one or scene.get("particles.file") is not None or scene.get("method.integrator", "euler") != "euler":
+    if method == "dgmpm" and not (one and scene.get("particles.file") is None
+                                  and scene.get("method.integrator", "euler") == "euler"):
         return False
     try:
         cores = len(os.sched_getaffinity(0))
     except AttributeError:
         cores = os.cpu_count() or 1
-    return cores >= 2 and _small(scene)
+    return cores >= 2 and _small(scene, per_cell)
 
 
-def _small(scene):
+def _small(scene, per_cell):
     try:
-        mesh = scene.get("grid.mesh")
-        if mesh is not None:
-            return os.path.getsize(scene.resolve(mesh)) <= MAX_MESH_BYTES
-        return float(np.prod(np.asarray(scene.get("grid.cells"), dtype=float))) <= MAX_POINTS
+        files = [scene.get(key) for key in ("grid.mesh", "particles.file") if scene.get(key) is not None]
+        if files:
+            return all(os.path.getsize(scene.resolve(f)) <= MAX_MESH_BYTES for f in files)
+        per_cell = (len(per_cell) if isinstance(per_cell, list) else int(per_cell)) ** scene.dim
+        return float(np.prod(np.asarray(scene.get("grid.cells"), dtype=float))) * per_cell <= MAX_POINTS
     except (OSError, TypeError, ValueError):    # the build says what is wrong
         return False
 
@@ -76,6 +80,7 @@ class CompileHelper:
 
     def __init__(self, scene):
         self.scene, self.process, self.folder, self.closed = scene, None, None, False
+        self.code = None                # its exit status: 0 where its step reached the law's pass
         self.waited = 0.0               # seconds `join` waited for it
         self.compiled = []              # the index files it wrote (the functions it compiled)
         self.merged = []                # those copied into this process's cache
@@ -107,7 +112,7 @@ class CompileHelper:
         from .kernel_cache import cache_dir
         t0 = time.perf_counter()
         try:
-            code = self.process.wait(timeout=self.TIMEOUT_S)
+            code = self.code = self.process.wait(timeout=self.TIMEOUT_S)
         except subprocess.TimeoutExpired:
             code = None
         self.waited = time.perf_counter() - t0
@@ -201,33 +206,39 @@ class _LawPass(Exception):
 def compile_step(scene):
     """Build ``scene`` and step it once on a placeholder initial state, up to the law's pass: the
     kernels of what comes before it compiled (and cached) with the real step's argument types.
-    For the helper process only: it replaces the schemes' initial state, checks and law pass.
-    Returns whether the step reached the law's pass."""
+    For the helper process only: it replaces the schemes' law pass at rest, their checks and the
+    step's law pass (`GodunovScheme.constitutive_update`, `DGFEM.evaluate_points`). Returns
+    whether the step reached the law's pass."""
     import numpy as np
 
-    from . import dgmpm, system
+    from . import dgmpm
     from .build import build
-    from .scheme import GodunovScheme, ParticleState
+    from .constitutive import MaterialSet
+    from .dgfem import DGFEM
+    from .mpm import MPM
+    from .scheme import GodunovScheme
 
     # placeholder numbers: finite, none zero (a compiled division by zero raises and would end
     # the step before its later passes compile); U is the scene's own
     fill = np.random.default_rng(0).uniform
 
-    def initial_state(self, F, v, t=0.0):
-        points = self.particles
-        U = system.join(F, points.rho0[:, None] * v)
-        n = len(U)
-        return ParticleState(t, U, fill(0.5, 1.5, U.shape), points.X.copy(), speed=np.ones(n), fastest=1.0,
-                             health={}, history=self.materials.initial_history(points.material))
+    def at_rest(self, state, points, *args, **kwargs):
+        return fill(0.5, 1.5, state.U.shape), state.history, None
 
-    def constitutive_update(self, *args, **kwargs):
+    def stress_update(self, F, index, history, assess=False):      # MPM's initial state's
+        return (fill(0.5, 1.5, F.shape), history) + ((None,) if assess else ())
+
+    def check(self, state, health=None):
+        state.speed, state.fastest, state.health = np.ones(len(state.U)), 1.0, {}
+
+    def law_pass(self, *args, **kwargs):
         raise _LawPass
 
-    GodunovScheme.initial_state = initial_state
-    GodunovScheme.constitutive_update = constitutive_update
+    GodunovScheme.at_rest, MaterialSet.stress_update, GodunovScheme.check = at_rest, stress_update, check
+    GodunovScheme.constitutive_update = DGFEM.evaluate_points = MPM.strain_stress = law_pass
     dgmpm._not_hyperbolic = lambda face: None       # placeholder states need not be hyperbolic
     disc = build(scene)
-    for records in disc.stepper._records()[0]:      # DGMPM's cell records (those of Q written by its initial state)
+    for records in getattr(disc.stepper, "_record_arrays", ((),))[0]:    # DGMPM's cell records
         records[...] = fill(0.5, 1.5, records.shape)
     try:
         disc.stepper.step(disc.initial)

@@ -1,6 +1,6 @@
-"""A first run's second process (`skdgmpm.compile_helper`): it compiles a DGMPM scene's face passes
-while the run compiles its law's pass, and the run loads them from its cache instead of compiling
-them; only functions the cache lacks are copied into it, each whole."""
+"""A first run's second process (`skdgmpm.compile_helper`): it compiles a scene's step up to its law's
+pass (DGMPM's face passes) while the run compiles that law's pass, and the run loads them from its
+cache instead of compiling them; only functions the cache lacks are copied into it, each whole."""
 import os
 import subprocess
 import sys
@@ -41,23 +41,26 @@ def test_merge_copies_the_functions_the_cache_lacks_and_keeps_its_own(tmp_path):
     assert compile_helper.merge(str(source), str(target)) == []               # nothing left to copy
 
 
-def test_dgmpm_runs_of_one_particle_per_cell_and_euler_on_two_cores_take_a_helper(monkeypatch):
-    """Where the initial state compiles the step's law pass and the helper the rest (with several
-    particles in a cell, or RK2, the step compiles its law's pass after the face passes: the
-    helper would do most of the work, measured 35.8 against 37.1 s for standing_wave_2d)."""
+def test_runs_whose_initial_state_compiles_the_steps_law_pass_take_a_helper(monkeypatch):
+    """Where the initial state compiles the step's own law pass and the helper the rest: DGMPM
+    with one particle per cell and forward Euler, ADER-DGMPM, ADER-DGFEM, RK-DGFEM and MPM. Not
+    DGMPM with several particles in a cell, a particle file or RK2 (its step compiles its law's
+    pass after the face passes: the helper would do most of the work, measured 35.8 against
+    37.1 s for standing_wave_2d), nor on one core, nor with $SKDGMPM_COMPILE_HELPER=0."""
     monkeypatch.setenv(compile_helper.ENV, "1")
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
-    assert compile_helper.wanted(load_scene("bar_elastic_1d"))
-    assert compile_helper.wanted(load_scene("bar_elastic_1d").with_overrides(["particles.per_cell=[0.25]"]))
-    for other in ("method.name=mpm", "method.name=ader-dgmpm", "method.integrator=rk2", "particles.per_cell=2",
-                  "particles.per_cell=[0.25, 0.75]"):
-        assert not compile_helper.wanted(load_scene("bar_elastic_1d").with_overrides([other])), other
+    bar = load_scene("bar_elastic_1d")
+    for taken in ([], ["particles.per_cell=[0.25]"], ["method.name=ader-dgmpm", "particles.per_cell=2"],
+                  ["method.name=ader-dgfem"], ["method.name=rk-dgfem", "method.integrator=rk2"], ["method.name=mpm"]):
+        assert compile_helper.wanted(bar.with_overrides(taken) if taken else bar), taken
+    for other in ("method.integrator=rk2", "particles.per_cell=2", "particles.per_cell=[0.25, 0.75]"):
+        assert not compile_helper.wanted(bar.with_overrides([other])), other
     assert not compile_helper.wanted(load_scene("standing_wave_2d"))
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0})
-    assert not compile_helper.wanted(load_scene("bar_elastic_1d"))
+    assert not compile_helper.wanted(bar)
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
     monkeypatch.setenv(compile_helper.ENV, "0")
-    assert not compile_helper.wanted(load_scene("bar_elastic_1d"))
+    assert not compile_helper.wanted(bar)
 
 
 def face_passes(lines, verb):
@@ -136,11 +139,15 @@ def test_the_mirror_is_read_only_to_numbas_writes(tmp_path):
     assert compile_helper.merge(str(theirs), str(mine)) == []           # the run has that function
 
 
-def test_on_a_cache_that_holds_the_step_the_helper_compiles_nothing(tmp_path, monkeypatch):
-    """Another scene of the kind ran: the helper loads the face passes from the run's cache
-    through its mirror, compiles no function and copies none."""
+@pytest.mark.parametrize("method", [[], ["method.name=ader-dgmpm", "particles.per_cell=2"], ["method.name=ader-dgfem"],
+                                    ["method.name=rk-dgfem", "method.integrator=rk2"], ["method.name=mpm"]],
+                         ids=["dgmpm", "ader-dgmpm", "ader-dgfem", "rk-dgfem", "mpm"])
+def test_on_a_cache_that_holds_the_step_the_helper_compiles_nothing(method, monkeypatch):
+    """Every method's helper steps its placeholder state up to the step's law pass (its exit
+    status 0 says it got there), and where the run's cache holds the step (the scene ran) it
+    loads every kernel through its mirror: it compiles no function and copies none."""
     monkeypatch.setenv(compile_helper.ENV, "1")
-    scene = load_scene("bar_elastic_1d")
+    scene = load_scene("bar_elastic_1d").with_overrides(method) if method else load_scene("bar_elastic_1d")
     assert run(scene, max_steps=1, progress=False).status in ("ok", "stopped")    # the cache holds its step
     helper = compile_helper.CompileHelper(scene)
     try:
@@ -149,7 +156,7 @@ def test_on_a_cache_that_holds_the_step_the_helper_compiles_nothing(tmp_path, mo
         helper.join()
     finally:
         helper.close()
-    assert helper.compiled == [] and helper.merged == []
+    assert helper.code == 0 and helper.compiled == [] and helper.merged == []
 
 
 def test_two_merges_into_one_cache_never_interleave(tmp_path):
