@@ -206,12 +206,11 @@ class _LawPass(Exception):
 def compile_step(scene):
     """Build ``scene`` and step it once on a placeholder initial state, up to the law's pass: the
     kernels of what comes before it compiled (and cached) with the real step's argument types.
-    For the helper process only: it replaces the schemes' law pass at rest, their checks and the
-    step's law pass (`GodunovScheme.constitutive_update`, `DGFEM.evaluate_points`). Returns
-    whether the step reached the law's pass."""
-    import numpy as np
-
-    from . import dgmpm
+    For the helper process only: it replaces the schemes' law pass at rest (and MPM's stress
+    pass), their checks and the step's law pass (`GodunovScheme.constitutive_update`,
+    `DGFEM.evaluate_points`, `MPM.strain_stress`). Returns whether the step reached the law's
+    pass."""
+    from . import ader, dgmpm, riemann
     from .build import build
     from .constitutive import MaterialSet
     from .dgfem import DGFEM
@@ -236,7 +235,8 @@ def compile_step(scene):
 
     GodunovScheme.at_rest, MaterialSet.stress_update, GodunovScheme.check = at_rest, stress_update, check
     GodunovScheme.constitutive_update = DGFEM.evaluate_points = MPM.strain_stress = law_pass
-    dgmpm._not_hyperbolic = lambda face: None       # placeholder states need not be hyperbolic
+    for module in (ader, dgmpm, riemann):            # placeholder states need not be hyperbolic
+        module._not_hyperbolic = lambda face: None
     disc = build(scene)
     for records in getattr(disc.stepper, "_record_arrays", ((),))[0]:    # DGMPM's cell records
         records[...] = fill(0.5, 1.5, records.shape)
