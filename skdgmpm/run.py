@@ -14,7 +14,6 @@ from numba.core import event
 
 from . import checkpoint, compile_helper, guards, outdir, output, parallel, probes as gauges
 from .build import build
-from .compile_helper import CompileHelper
 from .errors import InputError, InstabilityError, OutputError
 from .exact import relative_errors
 from .first_run import compile_notice
@@ -216,8 +215,8 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
         outdir.check(out, force, resume=saved is not None)
     begin = time.perf_counter()
     show = progress if notice is None else notice
-    # on the first compilation, a second process compiles the step's face passes meanwhile
-    helper = CompileHelper(scene) if saved is None and compile_helper.wanted(scene) else None
+    # on the first compilation, a second process compiles the rest of the step meanwhile
+    helper = compile_helper.CompileHelper(scene) if saved is None and compile_helper.wanted(scene) else None
     notice = (compile_notice(scene.get("method.name", "dgmpm"), scene.dim, on_first=helper and helper.start,
                              show=show) if show or helper else nullcontext())
     try:
