@@ -86,8 +86,9 @@ class CompileHelper:
         self.merged = []                # those copied into this process's cache
 
     def start(self):
+        """Start the helper (once, and not after `close`); whether it runs."""
         if self.process is not None or self.closed:
-            return
+            return self.process is not None
         from .kernel_cache import cache_dir
         try:
             os.makedirs(cache_dir(), exist_ok=True)
@@ -103,6 +104,7 @@ class CompileHelper:
                                             stderr=subprocess.DEVNULL)
         except (OSError, TypeError, ValueError):       # no helper: this process compiles all
             self.close()
+        return self.process is not None
 
     def join(self):
         """Wait for the helper (up to `TIMEOUT_S`), then copy its kernels that this process's

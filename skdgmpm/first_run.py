@@ -46,8 +46,8 @@ class compile_notice(event.Listener):
     kernel comes from the cache. ``seconds``: the CPU time spent compiling within (and the time
     the run waited for its compile helper, `skdgmpm.compile_helper`, added by the run), remembered
     as the next estimate for this method and dimension. ``on_first``: called at that first
-    compilation (the run's compile helper starts); ``show`` False: only that, no line and no
-    estimate kept."""
+    compilation (the run's compile helper starts; true where it did: the line says "on two
+    cores"); ``show`` False: only that, no line and no estimate kept."""
 
     def __init__(self, method, d, stream=None, on_first=None, show=True):
         self.what, self.stream, self.on_first, self.show = f"{method}, {d}D", stream, on_first, show
@@ -76,12 +76,12 @@ class compile_notice(event.Listener):
         self._start = time.process_time()
         if not self.shown and ours(ev):
             self.shown = True
-            if self.on_first is not None:
-                self.on_first()
+            helped = self.on_first is not None and self.on_first()
             if not self.show:
                 return
             expected = _measured().get(self.what, self.expected)
-            about = f"about {expected} s; " if expected else ""
+            about = (f"about {expected} s" if expected else "") + (", on two cores" if helped else "")
+            about += "; " if about else ""
             from tqdm import tqdm               # clears a progress bar on the stream, then redraws it
             tqdm.write(f"{NOTICE}{self.what} (first run, {about}cached afterwards in {cache_dir()})",
                        file=self.stream or sys.stderr)

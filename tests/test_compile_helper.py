@@ -9,7 +9,7 @@ import meshio
 import numpy as np
 import pytest
 
-from skdgmpm import compile_helper
+from skdgmpm import compile_helper, first_run
 from skdgmpm.run import run
 from skdgmpm.scene import load_scene
 
@@ -84,7 +84,8 @@ def test_a_cold_first_run_loads_the_face_passes_its_helper_compiled(tmp_path):
     assert face_passes(lines, "loaded") == {"interior_pass", "boundary_faces", "boundary_terms"}
     assert face_passes(lines, "saved") == set()
     assert any(line.startswith("[cache] data saved") and "_states." in line for line in lines)
-    assert done.stderr.count("compiling kernels for dgmpm, 1D") == 1
+    about = first_run.EXPECTED_S["dgmpm"][1]
+    assert done.stderr.count(f"{first_run.NOTICE}dgmpm, 1D (first run, about {about} s, on two cores; cached") == 1
     assert os.listdir(tmp_path / "tmp") == []                  # the helper's folder removed
 
     alone = run("bar_elastic_1d", out=tmp_path / "alone", progress=False)
@@ -118,7 +119,7 @@ def test_a_helper_closed_before_it_started_starts_nothing(tmp_path, monkeypatch)
     helper = compile_helper.CompileHelper(load_scene("bar_elastic_1d"))
     assert helper.join() == [] and helper.waited == 0.0
     helper.close()
-    helper.start()
+    assert not helper.start()
     assert started == [] and helper.process is None and helper.folder is None
 
 
