@@ -36,6 +36,9 @@ METHODS = ("dgmpm", "ader-dgmpm", "ader-dgfem", "rk-dgfem", "mpm")     # their i
 ENV = "SKDGMPM_COMPILE_HELPER"
 MAX_POINTS = 2 ** 20            # a larger scene compiles alone: the helper's set-up would double its memory
 MAX_MESH_BYTES = 64 * 2 ** 20   # the same for a mesh file, by its size (its cells unknown before it is read)
+# a DG cell of order P holds about 8 ((P + 1) / 2)^d times a particle's bytes (the bench at 256²:
+# ADER-DGFEM P1 10.5 kB a cell, DGMPM 1.3 kB a particle): its limits that much lower
+DG_METHODS = ("ader-dgmpm", "ader-dgfem", "rk-dgfem")
 
 
 def wanted(scene):
@@ -44,7 +47,8 @@ def wanted(scene):
     DGMPM with one particle per cell and forward Euler: with several particles in a cell, or
     RK2, its step compiles its law's pass after the face passes and the helper's share would be
     most of the work), of `MAX_POINTS` particles or fewer (a mesh file of `MAX_MESH_BYTES` or
-    less), two cores free to this process, $SKDGMPM_COMPILE_HELPER not 0."""
+    less; DG cells counted by their bytes, `DG_METHODS`), two cores free to this process,
+    $SKDGMPM_COMPILE_HELPER not 0."""
     method = scene.get("method.name", "dgmpm")
     if os.environ.get(ENV, "1") == "0" or method not in METHODS:
         return False
@@ -62,11 +66,15 @@ def wanted(scene):
 
 def _small(scene, per_cell):
     try:
+        method, d = scene.get("method.name", "dgmpm"), scene.dim
+        scale = 8 * ((int(scene.get("method.order", 1)) + 1) / 2) ** d if method in DG_METHODS else 1.0
         files = [scene.get(key) for key in ("grid.mesh", "particles.file") if scene.get(key) is not None]
         if files:
-            return all(os.path.getsize(scene.resolve(f)) <= MAX_MESH_BYTES for f in files)
-        per_cell = (len(per_cell) if isinstance(per_cell, list) else int(per_cell)) ** scene.dim
-        return float(np.prod(np.asarray(scene.get("grid.cells"), dtype=float))) * per_cell <= MAX_POINTS
+            return all(os.path.getsize(scene.resolve(f)) * scale <= MAX_MESH_BYTES for f in files)
+        points = (len(per_cell) if isinstance(per_cell, list) else int(per_cell)) ** d
+        if method in DG_METHODS:        # the cells' bytes, not the particles' (ADER-DGMPM's are fewer)
+            points = 1
+        return float(np.prod(np.asarray(scene.get("grid.cells"), dtype=float))) * points * scale <= MAX_POINTS
     except (OSError, TypeError, ValueError):    # the build says what is wrong
         return False
 

@@ -105,6 +105,11 @@ def test_a_scene_too_large_for_two_set_ups_compiles_alone(monkeypatch):
     plate = load_scene("plate_impact_neohookean_2d")
     assert compile_helper.wanted(plate.with_overrides(["grid.cells=[1024, 1024]"]))
     assert not compile_helper.wanted(plate.with_overrides(["grid.cells=[1024, 1025]"]))
+    ader = plate.with_overrides(["method.name=ader-dgfem"])               # a P1 cell: 8 particles' bytes
+    assert compile_helper.wanted(ader.with_overrides(["grid.cells=[256, 512]"]))
+    assert not compile_helper.wanted(ader.with_overrides(["grid.cells=[512, 512]"]))
+    assert not compile_helper.wanted(ader.with_overrides(["grid.cells=[256, 256]", "method.order=3"]))
+    assert compile_helper.wanted(ader.with_overrides(["grid.cells=[128, 128]", "method.order=3"]))
     partial = load_scene("partial_impact_2d")                 # a gmsh file
     assert compile_helper.wanted(partial)
     monkeypatch.setattr(compile_helper, "MAX_MESH_BYTES", 1000)
