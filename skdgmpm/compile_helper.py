@@ -86,8 +86,8 @@ class CompileHelper:
 
     TIMEOUT_S = 300
 
-    def __init__(self, scene):
-        self.scene, self.process, self.folder, self.closed = scene, None, None, False
+    def __init__(self, scene, resumed=False):
+        self.scene, self.resumed, self.process, self.folder, self.closed = scene, resumed, None, None, False
         self.code = None                # its exit status: 0 where its step reached the law's pass
         self.waited = 0.0               # seconds `join` waited for it
         self.compiled = []              # the index files it wrote (the functions it compiled)
@@ -104,7 +104,7 @@ class CompileHelper:
             mirror(cache_dir(), os.path.join(self.folder, "cache", os.path.basename(cache_dir())))
             spec = os.path.join(self.folder, "scene.json")
             with open(spec, "w") as f:
-                json.dump({"name": self.scene.name, "data": self.scene.data,
+                json.dump({"name": self.scene.name, "data": self.scene.data, "resumed": self.resumed,
                            "path": None if self.scene.path is None else str(self.scene.path)}, f)
             env = {**os.environ, "NUMBA_CACHE_DIR": os.path.join(self.folder, "cache"), ENV: "0"}
             self.process = subprocess.Popen([sys.executable, "-m", __name__, spec], env=env,
@@ -213,9 +213,11 @@ class _LawPass(Exception):
     """Raised where the placeholder step reaches the law's pass: the helper's work ends there."""
 
 
-def compile_step(scene):
+def compile_step(scene, resumed=False):
     """Build ``scene`` and step it once on a placeholder initial state, up to the law's pass: the
     kernels of what comes before it compiled (and cached) with the real step's argument types.
+    ``resumed``: as a resumed run's first step, whose state is not the initial one (DGMPM's face
+    passes then read cell records made for it, `cell_records`, not those of the initial state).
     For the helper process only: it replaces the schemes' law pass at rest (and MPM's stress
     pass), their checks and the step's law pass (`GodunovScheme.constitutive_update`,
     `DGFEM.evaluate_points`, `MPM.strain_stress`). Returns whether the step reached the law's
@@ -250,6 +252,8 @@ def compile_step(scene):
     disc = build(scene)
     for records in getattr(disc.stepper, "_record_arrays", ((),))[0]:    # DGMPM's cell records
         records[...] = fill(0.5, 1.5, records.shape)
+    if resumed and hasattr(disc.stepper, "_records_of"):
+        disc.stepper._records_of = None
     try:
         disc.stepper.step(disc.initial)
     except _LawPass:
@@ -265,7 +269,7 @@ def main(argv=None):
 
     from .scene import Scene
     scene = Scene.from_dict(spec["data"], spec["name"], None if spec["path"] is None else Path(spec["path"]))
-    sys.exit(0 if compile_step(scene) else 1)
+    sys.exit(0 if compile_step(scene, spec.get("resumed", False)) else 1)
 
 
 if __name__ == "__main__":

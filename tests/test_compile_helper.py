@@ -190,3 +190,26 @@ def test_two_merges_into_one_cache_never_interleave(tmp_path):
     other.join()
     mine.join(10)
     assert copied == [str(target / "skdgmpm" / "m.f-10.py311.nbi")]
+
+
+@pytest.mark.parametrize("resumed", [False, True])
+def test_the_placeholder_step_reaches_the_law_pass_and_a_resumed_one_makes_the_records(resumed, monkeypatch):
+    """`compile_step` in this process (the classes it patches put back afterwards): the step
+    reaches the law's pass; as a resumed run's first step, whose state is not the initial one,
+    it calls the record pass (`cell_records`) that such a step calls, and otherwise not (the
+    initial state's law pass wrote the records)."""
+    from skdgmpm import ader, dgmpm, riemann
+    from skdgmpm.constitutive import MaterialSet
+    from skdgmpm.dgfem import DGFEM
+    from skdgmpm.mpm import MPM
+    from skdgmpm.scheme import GodunovScheme
+
+    for owner, name in ((GodunovScheme, "at_rest"), (GodunovScheme, "check"), (GodunovScheme, "constitutive_update"),
+                        (MaterialSet, "stress_update"), (DGFEM, "evaluate_points"), (MPM, "strain_stress"),
+                        (ader, "_not_hyperbolic"), (dgmpm, "_not_hyperbolic"), (riemann, "_not_hyperbolic")):
+        monkeypatch.setattr(owner, name, getattr(owner, name))         # put back after the test
+    calls, records = [], dgmpm.cell_records
+    monkeypatch.setattr(dgmpm, "cell_records", lambda *a: calls.append(1) or records(*a))
+    assert compile_helper.compile_step(load_scene("plate_impact_neohookean_2d").with_overrides(["grid.cells=[8, 6]"]),
+                                       resumed)
+    assert calls == ([1] if resumed else [])
