@@ -42,21 +42,15 @@ DG_METHODS = ("ader-dgmpm", "ader-dgfem", "rk-dgfem")
 
 
 def wanted(scene):
-    """Whether a run of ``scene`` should start a helper on its first compilation: a method whose
-    initial state compiles the step's own law pass before the step compiles the rest (`METHODS`;
-    DGMPM with one particle per cell and forward Euler: with several particles in a cell, or
-    RK2, its step compiles its law's pass after the face passes and the helper's share would be
-    most of the work), of `MAX_POINTS` particles or fewer (a mesh file of `MAX_MESH_BYTES` or
-    less; DG cells counted by their bytes, `DG_METHODS`), two cores free to this process,
-    $SKDGMPM_COMPILE_HELPER not 0."""
+    """Whether a run of ``scene`` should start a helper on its first compilation: a method of
+    `METHODS` (its initial state compiles the step's own law pass, or the run compiles it beside
+    the helper: `GodunovScheme.compile_law_pass`), of `MAX_POINTS` particles or fewer (a mesh
+    file of `MAX_MESH_BYTES` or less; DG cells counted by their bytes, `DG_METHODS`), two cores
+    free to this process, $SKDGMPM_COMPILE_HELPER not 0."""
     method = scene.get("method.name", "dgmpm")
     if os.environ.get(ENV, "1") == "0" or method not in METHODS:
         return False
     per_cell = scene.get("particles.per_cell", 1)
-    one = per_cell == 1 or isinstance(per_cell, list) and len(per_cell) == 1
-    if method == "dgmpm" and not (one and scene.get("particles.file") is None
-                                  and scene.get("method.integrator", "euler") == "euler"):
-        return False
     try:
         cores = len(os.sched_getaffinity(0))
     except AttributeError:
@@ -92,6 +86,11 @@ class CompileHelper:
         self.waited = 0.0               # seconds `join` waited for it
         self.compiled = []              # the index files it wrote (the functions it compiled)
         self.merged = []                # those copied into this process's cache
+
+    @property
+    def running(self):
+        """Whether it was started and not yet joined or closed."""
+        return self.process is not None
 
     def start(self):
         """Start the helper (once, and not after `close`); whether it runs."""

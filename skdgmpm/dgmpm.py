@@ -50,7 +50,7 @@ from .faces import interior_faces
 from .integrators import INTEGRATORS
 from .quadrature import ParticleMap, particle_operators
 from .riemann import _not_hyperbolic
-from .scheme import GodunovScheme, GridState, cell_values, stage
+from .scheme import GodunovScheme, GridState, ParticleState, cell_values, stage
 
 
 @dataclass
@@ -226,6 +226,18 @@ class DGMPM(GodunovScheme):
         nc, sides = U.shape[1], 0 if self.ctu is None else 2       # `interface_flux`'s corrections
         return CellRows(self.particles.cell, np.full(self.cell_faces.shape, -1, self.cell_faces.dtype), np.zeros(0),
                         np.zeros((0, nc)), np.zeros((0, sides, nc)), 0.0, -0.0, self.inv_volume, U, np.zeros((1, nc)))
+
+    def compile_law_pass(self, state):
+        """With several particles in a cell the initial state takes the stand-alone passes (its
+        step's pass forms each point's state from the nodes): the step's pass, compiled now, once
+        on nodal states at F = I into a scratch U, typed as `step` types it (the nodal stage a
+        (n_dofs, nc) array); nothing of it is kept."""
+        if self.cellwise:
+            return
+        n, d = self.n_dofs, self.d
+        nodal = system.join(np.broadcast_to(np.eye(d), (n, d, d)).copy(), np.zeros((n, d)))
+        scratch = ParticleState(state.t, np.empty_like(state.U), None, state.x, history=state.history)
+        GodunovScheme.at_rest(self, scratch, self.particles, (self.map.S, nodal))
 
     def initial_state(self, F, v, t=0.0):
         state = super().initial_state(F, v, t)

@@ -15,8 +15,8 @@ from .kernel_cache import cache_base, cache_dir, ours
 # docs/bench/session39.md to session44.md, the rest of the step compiled by a second process
 # meanwhile (`skdgmpm.compile_helper`, session44.md §1; one process in brackets):
 # bar_elastic_1d 7-9 s (11-14 s, dgmpm); plate_impact_neohookean_2d 12-16 s (22-28 s, dgmpm),
-# 11 s (16 s, mpm); the J2 plate and partial_impact_2d 15 s (21-23 s); standing_wave_2d 37-47 s
-# (dgmpm, 2 x 2 particles per cell, no helper), 19-23 s (28 s, ader-dgfem P1), 17 s (22 s,
+# 11 s (16 s, mpm); the J2 plate and partial_impact_2d 15 s (21-23 s); standing_wave_2d 29-36 s
+# (37-49 s, dgmpm, 2 x 2 particles per cell), 19-23 s (28 s, ader-dgfem P1), 17 s (22 s,
 # rk-dgfem P1); multiholed_cell_j2_2d 29 s (37-44 s, ader-dgmpm, Hencky J2), lasat_2d 33 s (54 s);
 # the others estimated alike. The notice says the last one measured on this machine instead
 # (<base>/compile_seconds.json) where there is one.

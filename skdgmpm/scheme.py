@@ -294,6 +294,11 @@ class GodunovScheme:
                                                                  state.history, no_motion, gather, records)
         return Q, history, health
 
+    def compile_law_pass(self, state):
+        """Compile the step's law pass now, where the initial state has not (`initial_pass`), for
+        a run whose compile helper compiles the rest of the step meanwhile
+        (`skdgmpm.compile_helper`). Nothing here: the initial state took the step's pass."""
+
     def step_with_cfl_guard(self, state, dt_max, attempt):
         """Run ``attempt(dt) -> (new state, boundary work)``; repeat with a smaller Delta t if the
         waves of the new state are faster than the CFL condition allowed (e.g. the first step of

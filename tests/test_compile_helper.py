@@ -41,26 +41,58 @@ def test_merge_copies_the_functions_the_cache_lacks_and_keeps_its_own(tmp_path):
     assert compile_helper.merge(str(source), str(target)) == []               # nothing left to copy
 
 
-def test_runs_whose_initial_state_compiles_the_steps_law_pass_take_a_helper(monkeypatch):
-    """Where the initial state compiles the step's own law pass and the helper the rest: DGMPM
-    with one particle per cell and forward Euler, ADER-DGMPM, ADER-DGFEM, RK-DGFEM and MPM. Not
-    DGMPM with several particles in a cell, a particle file or RK2 (its step compiles its law's
-    pass after the face passes: the helper would do most of the work, measured 35.8 against
-    37.1 s for standing_wave_2d), nor on one core, nor with $SKDGMPM_COMPILE_HELPER=0."""
+def test_every_method_on_two_cores_takes_a_helper(monkeypatch):
+    """Every method's run compiles the step's law pass in its own process (its initial state's,
+    or `compile_law_pass` beside the helper for DGMPM with several particles in a cell) and the
+    rest in the helper's; not on one core, nor with $SKDGMPM_COMPILE_HELPER=0."""
     monkeypatch.setenv(compile_helper.ENV, "1")
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
     bar = load_scene("bar_elastic_1d")
-    for taken in ([], ["particles.per_cell=[0.25]"], ["method.name=ader-dgmpm", "particles.per_cell=2"],
+    for taken in ([], ["particles.per_cell=2"], ["method.integrator=rk2"], ["method.name=ader-dgmpm", "particles.per_cell=2"],
                   ["method.name=ader-dgfem"], ["method.name=rk-dgfem", "method.integrator=rk2"], ["method.name=mpm"]):
         assert compile_helper.wanted(bar.with_overrides(taken) if taken else bar), taken
-    for other in ("method.integrator=rk2", "particles.per_cell=2", "particles.per_cell=[0.25, 0.75]"):
-        assert not compile_helper.wanted(bar.with_overrides([other])), other
-    assert not compile_helper.wanted(load_scene("standing_wave_2d"))
+    assert compile_helper.wanted(load_scene("standing_wave_2d"))
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0})
     assert not compile_helper.wanted(bar)
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
     monkeypatch.setenv(compile_helper.ENV, "0")
     assert not compile_helper.wanted(bar)
+
+
+@pytest.mark.parametrize("scene, overrides", [("standing_wave_2d", ["grid.cells=[4, 4]"]),
+                                              ("bar_elastic_1d", ["particles.per_cell=2", "grid.cells=8"]),
+                                              ("bar_elastic_1d", ["grid.cells=8"])],
+                         ids=["nodal-2d", "nodal-1d", "one-per-cell"])
+def test_compile_law_pass_calls_the_steps_law_kernel_as_the_step_does(scene, overrides, monkeypatch):
+    """With several particles in a cell the initial state takes the stand-alone passes; the run
+    compiles the step's law pass beside its helper (`DGMPM.compile_law_pass`): the same kernel,
+    its arguments of the same numba types as the step's, and the state untouched. With one
+    particle per cell the initial state took it: nothing."""
+    import numba
+
+    from skdgmpm import parallel
+    from skdgmpm.build import build
+
+    disc = build(load_scene(scene).with_overrides(overrides))
+    calls, chunked = [], parallel.chunked
+
+    def spy(n, kernel, spec, args, *rest, **kwargs):
+        if getattr(kernel, "__name__", "") == "states":
+            calls.append((kernel, numba.typeof(args)))
+        return chunked(n, kernel, spec, args, *rest, **kwargs)
+
+    monkeypatch.setattr(parallel, "chunked", spy)
+    state = disc.initial
+    before = [a.copy() for a in (state.U, state.Q, state.x, state.history)]
+    disc.stepper.compile_law_pass(state)
+    for a, b in zip((state.U, state.Q, state.x, state.history), before):
+        assert np.array_equal(a.view(np.uint8), b.view(np.uint8))
+    made = len(calls)
+    disc.stepper.step(state)
+    if disc.stepper.cellwise:
+        assert made == 0
+    else:
+        assert made == 1 and calls[0] == calls[1]
 
 
 def face_passes(lines, verb):
