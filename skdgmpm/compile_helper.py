@@ -1,5 +1,6 @@
-"""A first run's kernels compiled on two cores: while this process compiles the law's pass for
-its initial state (the step's own: `GodunovScheme.at_rest`, MPM's stress pass), a second process
+"""A first run's kernels compiled on two cores: while this process compiles the step's law pass
+(for its initial state, `GodunovScheme.at_rest`, MPM's stress pass; or beside it,
+`GodunovScheme.compile_law_pass`: DGMPM with several particles in a cell), a second process
 compiles the rest of the step (DGMPM's face passes, ADER's predictor and fluxes, MPM's transfers),
 which this one then loads from the cache instead of compiling it (numba compiles under one lock a
 process: two processes are the only way to use a second core).
