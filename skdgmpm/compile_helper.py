@@ -33,7 +33,6 @@ import time
 
 import numpy as np
 
-METHODS = ("dgmpm", "ader-dgmpm", "ader-dgfem", "rk-dgfem", "mpm")     # their initial state: the step's law pass
 ENV = "SKDGMPM_COMPILE_HELPER"
 MAX_POINTS = 2 ** 20            # a larger scene compiles alone: the helper's set-up would double its memory
 MAX_MESH_BYTES = 64 * 2 ** 20   # the same for a mesh file, by its size (its cells unknown before it is read)
@@ -43,32 +42,31 @@ DG_METHODS = ("ader-dgmpm", "ader-dgfem", "rk-dgfem")
 
 
 def wanted(scene):
-    """Whether a run of ``scene`` should start a helper on its first compilation: a method of
-    `METHODS` (its initial state compiles the step's own law pass, or the run compiles it beside
-    the helper: `GodunovScheme.compile_law_pass`), of `MAX_POINTS` particles or fewer (a mesh
-    file of `MAX_MESH_BYTES` or less; DG cells counted by their bytes, `DG_METHODS`), two cores
-    free to this process, $SKDGMPM_COMPILE_HELPER not 0."""
-    method = scene.get("method.name", "dgmpm")
-    if os.environ.get(ENV, "1") == "0" or method not in METHODS:
+    """Whether a run of ``scene`` should start a helper on its first compilation: every method's
+    run compiles the step's law pass itself (for its initial state, or beside the helper:
+    `GodunovScheme.compile_law_pass`); where the scene has `MAX_POINTS` particles or fewer (a mesh
+    or particle file of `MAX_MESH_BYTES` or less; DG cells counted by their bytes, `DG_METHODS`),
+    two cores are free to this process and $SKDGMPM_COMPILE_HELPER is not 0."""
+    if os.environ.get(ENV, "1") == "0":
         return False
-    per_cell = scene.get("particles.per_cell", 1)
     try:
         cores = len(os.sched_getaffinity(0))
     except AttributeError:
         cores = os.cpu_count() or 1
-    return cores >= 2 and _small(scene, per_cell)
+    return cores >= 2 and _small(scene)
 
 
-def _small(scene, per_cell):
+def _small(scene):
     try:
-        method, d = scene.get("method.name", "dgmpm"), scene.dim
-        scale = 8 * ((int(scene.get("method.order", 1)) + 1) / 2) ** d if method in DG_METHODS else 1.0
+        d, order = scene.dim, int(scene.get("method.order", 1))
+        dg = scene.get("method.name", "dgmpm") in DG_METHODS
+        scale = 8 * ((order + 1) / 2) ** d if dg else 1.0
         files = [scene.get(key) for key in ("grid.mesh", "particles.file") if scene.get(key) is not None]
         if files:
             return all(os.path.getsize(scene.resolve(f)) * scale <= MAX_MESH_BYTES for f in files)
-        points = (len(per_cell) if isinstance(per_cell, list) else int(per_cell)) ** d
-        if method in DG_METHODS:        # the cells' bytes, not the particles' (ADER-DGMPM's are fewer)
-            points = 1
+        per_cell = scene.get("particles.per_cell", 1)
+        # a DG scene: its cells' bytes (ADER-DGMPM's particles are fewer), else its particles'
+        points = 1 if dg else (len(per_cell) if isinstance(per_cell, list) else int(per_cell)) ** d
         return float(np.prod(np.asarray(scene.get("grid.cells"), dtype=float))) * points * scale <= MAX_POINTS
     except (OSError, TypeError, ValueError):    # the build says what is wrong
         return False

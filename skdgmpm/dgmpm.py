@@ -237,7 +237,7 @@ class DGMPM(GodunovScheme):
         n, d = self.n_dofs, self.d
         nodal = system.join(np.broadcast_to(np.eye(d), (n, d, d)).copy(), np.zeros((n, d)))
         scratch = ParticleState(state.t, np.empty_like(state.U), None, state.x, history=state.history)
-        GodunovScheme.at_rest(self, scratch, self.particles, (self.map.S, nodal))
+        super().at_rest(scratch, self.particles, (self.map.S, nodal))
 
     def initial_state(self, F, v, t=0.0):
         state = super().initial_state(F, v, t)
