@@ -1,12 +1,24 @@
 """The compiled kernels' folders on disk: one per source digest (`kernel_cache.cache_dir`), listed
-and pruned (``skdgmpm cache [--prune]``).
+and pruned (``skdgmpm cache [--prune]``), and written one process at a time (`lock_writes`).
 
 Every edit of a file with compiled code, and every release, files its kernels under a new digest
 (60-70 MB for every method and dimension); the folders of other digests stay until removed: a
 second checkout or venv with other sources uses its own. Only folders named ``kernels-<16 hex
 digits>`` (with a `kernel_cache.build_tag` suffix or none) directly under the cache's base are
 touched, never anything else there (the base may be a $NUMBA_CACHE_DIR that other code shares).
+
+Two processes compiling into one folder (two runs side by side on a cold cache, a run and its
+compile helper's merge) would otherwise race in numba's writes of a function's index: numba
+(`numba.core.caching.IndexDataCacheFile.save`) reads the index, picks the first data file number
+it does not list, writes the index, then the data, and takes no lock. Two processes saving two
+signatures of one function can both pick number n; where one writes its index last and the other
+its data last, the index pairs that key with the other signature's code, which a later run would
+load and call with the wrong types. `lock_writes` makes each save of this package's kernels hold
+the folder's lock (`locked`) from its read of the index to its data's rename. Loads take no lock:
+each file is renamed into place whole, and a key whose data is not there yet reads as a miss.
+(No compiled code here: this module is not part of the kernels' cache key.)
 """
+import contextlib
 import os
 import re
 import shutil
@@ -17,6 +29,46 @@ from pathlib import Path
 from . import kernel_cache
 
 _FOLDER = re.compile(r"kernels-[0-9a-f]{16}(-[a-z0-9]+)*")     # -debug, ...: `kernel_cache.build_tag`
+LOCK = ".writes.lock"           # in a kernel folder: held by each save into it (`locked`)
+
+
+@contextlib.contextmanager
+def locked(folder):
+    """An exclusive lock of the kernel folder ``folder`` (its file `LOCK`) for the block, where
+    fcntl is (elsewhere none: numba's own writes, as before)."""
+    try:
+        import fcntl
+    except ImportError:
+        yield
+        return
+    os.makedirs(folder, exist_ok=True)
+    with open(os.path.join(folder, LOCK), "a") as f:
+        fcntl.flock(f, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)
+
+
+def lock_writes():
+    """Make numba save each kernel of this package (a file of <base>/kernels-<digest>/<package>/)
+    under its kernel folder's lock (see the module's docstring); every other cache's saves as
+    before. Idempotent."""
+    from numba.core.caching import IndexDataCacheFile
+
+    save = IndexDataCacheFile.save
+    if getattr(save, "locks_kernel_folders", False):
+        return
+
+    def locked_save(self, key, data):
+        folder = os.path.dirname(self._cache_path)
+        if not _FOLDER.fullmatch(os.path.basename(folder)):
+            return save(self, key, data)
+        with locked(folder):
+            return save(self, key, data)
+
+    locked_save.locks_kernel_folders = True
+    IndexDataCacheFile.save = locked_save
 
 
 def folders(base=None):

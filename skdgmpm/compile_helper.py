@@ -22,7 +22,6 @@ step already (another scene of the same kind ran, with a new law), the helper lo
 done in its start-up, while this process compiles its law's pass. No compiled code here: this
 module is not part of the kernels' cache key.
 """
-import contextlib
 import json
 import os
 import shutil
@@ -32,6 +31,8 @@ import tempfile
 import time
 
 import numpy as np
+
+from .cache_folders import locked
 
 ENV = "SKDGMPM_COMPILE_HELPER"
 MAX_POINTS = 2 ** 20            # a larger scene compiles alone: the helper's set-up would double its memory
@@ -162,28 +163,13 @@ def merge(source, target):
     """Copy each compiled function of the cache folder ``source`` (its index file ``*.nbi`` and
     data files ``*.<n>.nbc``, in the package folders below it) into ``target`` where ``target``
     has no index of that function; the data first, each file under a temporary name then renamed,
-    so that a reader never sees an index without its data; under a lock of ``target``'s, so that
-    two runs' merges never interleave (a copy of one helper's data under another's index would
-    pair a key with another signature's code). Returns the index files copied."""
-    with _locked(target):
+    so that a reader never sees an index without its data; under ``target``'s lock
+    (`cache_folders.locked`, which numba's saves into it hold too), so that a merge never
+    interleaves with another run's merge or compilation (a copy of one helper's data under
+    another's index would pair a key with another signature's code). Returns the index files
+    copied."""
+    with locked(target):
         return _merge(source, target)
-
-
-@contextlib.contextmanager
-def _locked(folder):
-    """An exclusive lock of ``folder`` (its file .merge.lock) for the block, where fcntl is."""
-    try:
-        import fcntl
-    except ImportError:
-        yield
-        return
-    os.makedirs(folder, exist_ok=True)
-    with open(os.path.join(folder, ".merge.lock"), "a") as f:
-        fcntl.flock(f, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(f, fcntl.LOCK_UN)
 
 
 def _merge(source, target):

@@ -12,6 +12,7 @@ import pytest
 from skdgmpm import compile_helper, first_run
 from skdgmpm.run import run
 from skdgmpm.scene import load_scene
+from test_cache_folders import waits_for_lock
 
 
 def write(path, text):
@@ -199,28 +200,12 @@ def test_on_a_cache_that_holds_the_step_the_helper_compiles_nothing(method, monk
 
 def test_two_merges_into_one_cache_never_interleave(tmp_path):
     """Runs side by side: a merge waits while another holds the cache folder's lock."""
-    import threading
-
     source, target = tmp_path / "helper" / "kernels-x", tmp_path / "mine" / "kernels-x"
     write(source / "skdgmpm" / "m.f-10.py311.nbi", b"index f")
     write(source / "skdgmpm" / "m.f-10.py311.1.nbc", b"f 1")
-    copied, held, release = [], threading.Event(), threading.Event()
-
-    def other_merge():
-        with compile_helper._locked(str(target)):
-            held.set()
-            release.wait(10)
-
-    other = threading.Thread(target=other_merge)
-    other.start()
-    held.wait(10)
-    mine = threading.Thread(target=lambda: copied.extend(compile_helper.merge(str(source), str(target))))
-    mine.start()
-    mine.join(0.3)
-    assert mine.is_alive() and not (target / "skdgmpm").exists()        # waiting for the lock
-    release.set()
-    other.join()
-    mine.join(10)
+    copied = []
+    waits_for_lock(target, lambda: copied.extend(compile_helper.merge(str(source), str(target))),
+                   target / "skdgmpm")
     assert copied == [str(target / "skdgmpm" / "m.f-10.py311.nbi")]
 
 
