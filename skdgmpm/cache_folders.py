@@ -35,15 +35,20 @@ LOCK = ".writes.lock"           # in a kernel folder: held by each save into it 
 @contextlib.contextmanager
 def locked(folder):
     """An exclusive lock of the kernel folder ``folder`` (its file `LOCK`) for the block, where
-    fcntl is (elsewhere none: numba's own writes, as before)."""
+    the system and the file system have one (elsewhere none: numba's own writes, as before)."""
     try:
         import fcntl
-    except ImportError:
+        os.makedirs(folder, exist_ok=True)
+        f = open(os.path.join(folder, LOCK), "a")
+    except (ImportError, OSError):
         yield
         return
-    os.makedirs(folder, exist_ok=True)
-    with open(os.path.join(folder, LOCK), "a") as f:
-        fcntl.flock(f, fcntl.LOCK_EX)
+    with f:
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX)
+        except OSError:                 # e.g. a network file system without locks
+            yield
+            return
         try:
             yield
         finally:

@@ -137,3 +137,26 @@ def test_two_processes_saving_into_one_kernel_folder_keep_every_key_with_its_own
     index = cache._load_index()
     assert sorted(index) == sorted((who + str(i),) for who in "AB" for i in range(n))
     assert all(cache.load(key) == key[0] for key in index)
+
+
+def test_where_the_file_system_has_no_locks_a_save_goes_on_unlocked(tmp_path, monkeypatch):
+    """flock refused (a network file system, ENOLCK) or the lock file not writable: numba's save as
+    before, never an error inside a compilation."""
+    import errno
+    import fcntl
+
+    from numba.core.caching import IndexDataCacheFile
+
+    def refused(*args):
+        raise OSError(errno.ENOLCK, "No locks available")
+
+    folder = tmp_path / "kernels-0123456789abcdef"
+    (folder / "skdgmpm").mkdir(parents=True)
+    with monkeypatch.context() as m:
+        m.setattr(fcntl, "flock", refused)
+        IndexDataCacheFile(str(folder / "skdgmpm"), "m.f-10.py311", "stamp").save(("a",), "code a")
+    (folder / cache_folders.LOCK).unlink()
+    (folder / cache_folders.LOCK).mkdir()          # cannot be opened as a file
+    IndexDataCacheFile(str(folder / "skdgmpm"), "m.f-10.py311", "stamp").save(("b",), "code b")
+    cache = IndexDataCacheFile(str(folder / "skdgmpm"), "m.f-10.py311", "stamp")
+    assert (cache.load(("a",)), cache.load(("b",))) == ("code a", "code b")
