@@ -51,8 +51,9 @@ def test_import_sets_nothing_global_and_keeps_the_repository_off_the_package_pat
     assert same and path == [str(Path(skdgmpm.__file__).parent)]
     assert len(materials) == 1 and Path(materials[0]).name == "materials"
     # no kernel module imported, nothing compiled; `_uids` only moves the start of numba's function
-    # numbering (symbol names: any numba code of the process, which it changes nothing else in)
-    assert modules == ["skdgmpm", "skdgmpm._uids", "skdgmpm.kernel_cache"]
+    # numbering (symbol names: any numba code of the process, which it changes nothing else in);
+    # `cache_folders` locks numba's saves into this package's kernel folders only
+    assert modules == ["skdgmpm", "skdgmpm._uids", "skdgmpm.cache_folders", "skdgmpm.kernel_cache"]
 
 
 def _axpy4():
