@@ -9,7 +9,7 @@ compiles is inside the caller's time, one level deeper). Prints the run's start-
 kernels compiled at the top level, slowest first, each with numba's own split of it: its front
 end (typing, inlining, lowering to LLVM IR) and LLVM's optimisation and code generation; then
 the functions most often compiled inside them. The first run's notice says how long a scene
-compiles; this says where it goes. The run's compile helper (`skdgmpm.compile_helper`) is off
+compiles; this says where it goes. The run's compile helpers (`skdgmpm.compile_helper`) are off
 unless ``--helper``: then the list is what the run's own process still compiles. Timings are the
 machine's at hand, not test results.
 """
@@ -85,10 +85,13 @@ def main():
     parser.add_argument("--passes", type=int, default=0, metavar="N",
                         help="numba's slowest compiler passes of each of the N slowest kernels")
     parser.add_argument("--helper", action="store_true",
-                        help="with the run's compile helper (skdgmpm.compile_helper): what the run's own process "
-                             "compiles while the helper compiles the step's face passes; without it, every kernel")
+                        help="with the run's compile helpers (skdgmpm.compile_helper): what the run's own process "
+                             "compiles while they compile the step's face passes; without them, every kernel")
     args = parser.parse_args()
-    os.environ["SKDGMPM_COMPILE_HELPER"] = "1" if args.helper else "0"
+    if args.helper:                 # as a user's run has them
+        os.environ.pop("SKDGMPM_COMPILE_HELPER", None)
+    else:
+        os.environ["SKDGMPM_COMPILE_HELPER"] = "0"
     with tempfile.TemporaryDirectory() as work:
         config.CACHE_DIR = os.path.join(work, "cache")      # before the package's kernels are made
         from skdgmpm.cli import main as skdgmpm

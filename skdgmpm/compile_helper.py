@@ -16,12 +16,18 @@ cache (`mirror`): it loads what that holds and compiles only what it lacks. A he
 or is not done within `CompileHelper.TIMEOUT_S`, costs nothing but its time: this process
 compiles what it lacks.
 
+A DGMPM step on the grid's nodes (any layout but one particle per cell with forward Euler) takes
+its face passes' trace path, whose kernels are the longest to compile (13-19 s each in 2D): two
+helpers share that step (`shares`), one compiling the cell records' and the boundary faces'
+kernels, the other the rest, each stepping past the other's kernels on placeholders.
+
 Started on this process's first compilation of one of the package's kernels in a run
 (`skdgmpm.first_run.compile_notice`), where `wanted`. On a cache that holds the rest of the
 step already (another scene of the same kind ran, with a new law), the helper loads it and is
 done in its start-up, while this process compiles its law's pass. No compiled code here: this
 module is not part of the kernels' cache key.
 """
+import itertools
 import json
 import os
 import shutil
@@ -57,6 +63,23 @@ def wanted(scene):
     return cores >= 2 and _small(scene)
 
 
+def shares(scene):
+    """What each helper of a run of ``scene`` compiles (`compile_step`): ("step",), the whole
+    step up to its law's pass; or, for a DGMPM step on the grid's nodes as the scene asks it (its
+    face passes' trace path: `DGMPM.trace_path`), ("interior", "boundary"): the cell records' and
+    the boundary faces' kernels in the second, the rest in the first, which the two helpers then
+    compile side by side ($SKDGMPM_COMPILE_HELPER=1: one helper always). A scene read wrong here
+    (a particle file of one particle per cell) costs only the balance: each helper builds the
+    scene and compiles what its step calls."""
+    if os.environ.get(ENV) == "1" or scene.get("method.name", "dgmpm") != "dgmpm":
+        return ("step",)
+    per_cell = scene.get("particles.per_cell", 1)
+    per_axis = len(per_cell) if isinstance(per_cell, list) else per_cell
+    nodal = (per_axis != 1 or scene.get("particles.file") is not None or scene.get("method.integrator", "euler") != "euler"
+             or scene.get("method.layout", "auto") == "nodes")
+    return ("interior", "boundary") if nodal else ("step",)
+
+
 def _small(scene):
     try:
         d, order = scene.dim, int(scene.get("method.order", 1))
@@ -80,8 +103,9 @@ class CompileHelper:
 
     TIMEOUT_S = 300
 
-    def __init__(self, scene, resumed=False):
-        self.scene, self.resumed, self.process, self.folder, self.closed = scene, resumed, None, None, False
+    def __init__(self, scene, resumed=False, share="step"):
+        self.scene, self.resumed, self.share = scene, resumed, share
+        self.process, self.folder, self.closed = None, None, False
         self.code = None                # its exit status: 0 where its step reached the law's pass
         self.waited = 0.0               # seconds `join` waited for it
         self.compiled = []              # the index files it wrote (the functions it compiled)
@@ -104,7 +128,8 @@ class CompileHelper:
             spec = os.path.join(self.folder, "scene.json")
             with open(spec, "w") as f:
                 json.dump({"name": self.scene.name, "data": self.scene.data, "resumed": self.resumed,
-                           "path": None if self.scene.path is None else str(self.scene.path)}, f)
+                           "share": self.share, "path": None if self.scene.path is None else str(self.scene.path)},
+                          f)
             env = {**os.environ, "NUMBA_CACHE_DIR": os.path.join(self.folder, "cache"), ENV: "0"}
             self.process = subprocess.Popen([sys.executable, "-m", __name__, spec], env=env,
                                             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
@@ -144,6 +169,34 @@ class CompileHelper:
         if self.folder is not None:
             shutil.rmtree(self.folder, ignore_errors=True)
             self.folder = None
+
+
+class CompileHelpers:
+    """A run's helpers, one per share of its step (`shares`), started, joined and closed together
+    (each as `CompileHelper`). ``waited``: the seconds the run waited for them all."""
+
+    def __init__(self, scene, resumed=False):
+        self.helpers = [CompileHelper(scene, resumed, share) for share in shares(scene)]
+
+    @property
+    def running(self):
+        return any(h.running for h in self.helpers)
+
+    @property
+    def waited(self):
+        return sum(h.waited for h in self.helpers)
+
+    def start(self):
+        """Start every helper; whether one runs."""
+        return [h.start() for h in self.helpers].count(True) > 0
+
+    def join(self):
+        """Join each in turn (`CompileHelper.join`); the index files copied from them all."""
+        return [name for h in self.helpers for name in h.join()]
+
+    def close(self):
+        for h in self.helpers:
+            h.close()
 
 
 def mirror(source, target):
@@ -197,9 +250,12 @@ class _LawPass(Exception):
     """Raised where the placeholder step reaches the law's pass: the helper's work ends there."""
 
 
-def compile_step(scene, resumed=False):
+def compile_step(scene, resumed=False, share="step"):
     """Build ``scene`` and step it once on a placeholder initial state, up to the law's pass: the
     kernels of what comes before it compiled (and cached) with the real step's argument types.
+    ``share`` (`shares`): "step", all of them; "boundary", DGMPM's cell records and boundary faces
+    only (the interior faces' passes skipped, their outputs placeholders; the step ends after the
+    boundary faces); "interior", all but those two.
     ``resumed``: as a resumed run's first step, whose state is not the initial one (DGMPM's face
     passes then read cell records made for it, `cell_records`, not those of the initial state).
     For the helper process only: it replaces the schemes' law pass at rest (and MPM's stress
@@ -233,6 +289,8 @@ def compile_step(scene, resumed=False):
     GodunovScheme.constitutive_update = DGFEM.evaluate_points = MPM.strain_stress = law_pass
     for module in (ader, dgmpm, riemann):            # placeholder states need not be hyperbolic
         module._not_hyperbolic = lambda face: None
+    if share != "step":
+        _split_faces(dgmpm, share, fill)
     disc = build(scene)
     for records in getattr(disc.stepper, "_record_arrays", ((),))[0]:    # DGMPM's cell records
         records[...] = fill(0.5, 1.5, records.shape)
@@ -245,6 +303,40 @@ def compile_step(scene, resumed=False):
     return False
 
 
+def _split_faces(dgmpm, share, fill):
+    """The face passes of DGMPM's step (names in `skdgmpm.dgmpm`) that the helper of ``share``
+    leaves to the other (`shares`) replaced by placeholders that fill their outputs (the last of
+    their arguments) with ``fill``'s numbers and report no failure; with "boundary" the step ends
+    after the boundary faces' pass."""
+    def placeholder(outputs, returns=None):
+        def skipped(*args):
+            for a in args[len(args) - outputs:]:
+                a[...] = fill(0.5, 1.5, a.shape)
+            return returns
+        return skipped
+
+    if share == "boundary":
+        boundary_faces = dgmpm.boundary_faces
+
+        def boundary_then_stop(*args):
+            boundary_faces(*args)
+            raise _LawPass
+
+        # interior_pass(..., flux, G); cell_corrections(..., W, corr_bnd): W is G, in place
+        dgmpm.interior_pass, dgmpm.cell_corrections = placeholder(2, -1), placeholder(1)
+        dgmpm.boundary_faces = boundary_then_stop
+    elif share == "interior":
+        # cell_records(..., rec, state): the records as the helper filled them (`compile_step`),
+        # every cell recorded in the first call (the CTU corrections as the cells send them: the
+        # nodes of a cell equal, a body at rest or one particle a cell), none in the others (as
+        # the edges gather them: RK2's second stage); boundary_faces(..., flux, t_s, v_s, parts)
+        calls = itertools.count()
+        dgmpm.cell_records = lambda *args: args[-1].fill(1 if next(calls) == 0 else 0)
+        dgmpm.boundary_faces = placeholder(4, -1)
+    else:
+        raise ValueError(f"compile helper: share {share!r} unknown")
+
+
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
     with open(argv[0]) as f:
@@ -253,7 +345,7 @@ def main(argv=None):
 
     from .scene import Scene
     scene = Scene.from_dict(spec["data"], spec["name"], None if spec["path"] is None else Path(spec["path"]))
-    sys.exit(0 if compile_step(scene, spec.get("resumed", False)) else 1)
+    sys.exit(0 if compile_step(scene, spec.get("resumed", False), spec.get("share", "step")) else 1)
 
 
 if __name__ == "__main__":

@@ -103,15 +103,20 @@ def face_passes(lines, verb):
 
 
 @pytest.mark.skipif(len(getattr(os, "sched_getaffinity", lambda pid: {0})(0)) < 2, reason="one core")
-def test_a_cold_first_run_loads_the_face_passes_its_helper_compiled(tmp_path):
+@pytest.mark.parametrize("overrides", [[], ["particles.per_cell=2", "method.cfl=0.5"]], ids=["one-helper", "two-helpers-nodes"])
+def test_a_cold_first_run_loads_the_face_passes_its_helper_compiled(overrides, tmp_path):
     """A first run on an empty cache: its own process saves the law's pass and loads the face
-    passes (numba's cache log, which the helper's process does not write here), and its answers
-    are those of this process's kernels, compiled alone, bit for bit (the same code compiled)."""
+    passes (numba's cache log, which the helpers' processes do not write here), and its answers
+    are those of this process's kernels, compiled alone, bit for bit (the same code compiled).
+    With two particles a cell two helpers share the face passes (`shares`)."""
     (tmp_path / "tmp").mkdir()
-    env = {**os.environ, compile_helper.ENV: "1", "NUMBA_CACHE_DIR": str(tmp_path / "cache"),
-           "NUMBA_DEBUG_CACHE": "1", "TMPDIR": str(tmp_path / "tmp")}
+    env = {k: v for k, v in os.environ.items() if k != compile_helper.ENV}      # as a user's run: `shares`
+    env.update({"NUMBA_CACHE_DIR": str(tmp_path / "cache"), "NUMBA_DEBUG_CACHE": "1", "TMPDIR": str(tmp_path / "tmp")})
+    scene = load_scene("bar_elastic_1d").with_overrides(overrides) if overrides else load_scene("bar_elastic_1d")
+    assert len(compile_helper.shares(scene)) == (2 if overrides else 1)
+    sets = [a for o in overrides for a in ("--set", o)]
     done = subprocess.run([sys.executable, "-m", "skdgmpm.cli", "run", "bar_elastic_1d", "--out", str(tmp_path / "out"),
-                           "--quiet"], env=env, cwd=tmp_path, capture_output=True, text=True, timeout=600)
+                           "--quiet", *sets], env=env, cwd=tmp_path, capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
     lines = done.stdout.splitlines() + done.stderr.splitlines()
     assert face_passes(lines, "loaded") == {"interior_pass", "boundary_faces", "boundary_terms"}
@@ -121,13 +126,64 @@ def test_a_cold_first_run_loads_the_face_passes_its_helper_compiled(tmp_path):
     assert done.stderr.count(f"{first_run.NOTICE}dgmpm, 1D (first run, about {about} s, on two cores; cached") == 1
     assert os.listdir(tmp_path / "tmp") == []                  # the helper's folder removed
 
-    alone = run("bar_elastic_1d", out=tmp_path / "alone", progress=False)
+    alone = run(scene, out=tmp_path / "alone", progress=False)
     assert alone.status == "ok"
     last = sorted((tmp_path / "out").glob("particles_*.vtu"))[-1]
     here, there = meshio.read(tmp_path / "alone" / last.name), meshio.read(last)
     assert set(here.point_data) == set(there.point_data)
     for name, values in here.point_data.items():
         assert np.array_equal(values.view(np.uint8), there.point_data[name].view(np.uint8)), name
+
+
+def test_a_dgmpm_step_on_the_nodes_is_shared_by_two_helpers(monkeypatch):
+    """DGMPM on the grid's nodes (several particles a cell, RK2, the "nodes" layout) compiles its
+    face passes' trace path: two helpers share its step; every other step takes one, as does any
+    run with $SKDGMPM_COMPILE_HELPER=1; a run's helpers are one per share."""
+    monkeypatch.delenv(compile_helper.ENV, raising=False)
+    bar = load_scene("bar_elastic_1d")
+    for taken, shares in (([], ("step",)), (["particles.per_cell=2"], ("interior", "boundary")),
+                          (["particles.per_cell=[0.5]"], ("step",)), (["particles.per_cell=[0.25, 0.75]"], ("interior", "boundary")),
+                          (["method.integrator=rk2"], ("interior", "boundary")), (["method.layout=nodes"], ("interior", "boundary")),
+                          (["method.name=ader-dgmpm", "particles.per_cell=2"], ("step",)), (["method.name=mpm"], ("step",))):
+        assert compile_helper.shares(bar.with_overrides(taken) if taken else bar) == shares, taken
+    wave = load_scene("standing_wave_2d")
+    assert compile_helper.shares(wave) == ("interior", "boundary")
+    assert [h.share for h in compile_helper.CompileHelpers(wave).helpers] == ["interior", "boundary"]
+    monkeypatch.setenv(compile_helper.ENV, "1")
+    assert compile_helper.shares(wave) == ("step",)
+
+
+@pytest.mark.parametrize("scene, overrides", [("standing_wave_2d", ["grid.cells=[4, 4]"]),
+                                              ("plate_impact_neohookean_2d", ["grid.cells=[8, 6]", "method.integrator=rk2"])],
+                         ids=["nodes", "rk2"])
+def test_each_share_compiles_its_own_face_passes_and_steps_past_the_others(scene, overrides, monkeypatch):
+    """`compile_step` of each share in this process (what it patches put back afterwards): the
+    "boundary" helper calls the record pass and the boundary faces' pass and ends there, the
+    interior faces' pass a placeholder; the "interior" helper calls the interior faces' pass (in
+    both of RK2's stages) and reaches the law's pass, the record and boundary passes
+    placeholders."""
+    from skdgmpm import ader, dgmpm, riemann
+    from skdgmpm.constitutive import MaterialSet
+    from skdgmpm.dgfem import DGFEM
+    from skdgmpm.mpm import MPM
+    from skdgmpm.scheme import GodunovScheme
+
+    for owner, name in ((GodunovScheme, "at_rest"), (GodunovScheme, "check"), (GodunovScheme, "constitutive_update"),
+                        (MaterialSet, "stress_update"), (DGFEM, "evaluate_points"), (MPM, "strain_stress"),
+                        (ader, "_not_hyperbolic"), (dgmpm, "_not_hyperbolic"), (riemann, "_not_hyperbolic")):
+        monkeypatch.setattr(owner, name, getattr(owner, name))         # put back after the test
+    stages = 2 if "method.integrator=rk2" in overrides else 1
+    for share, expected in (("boundary", {"cell_records": 1, "boundary_faces": 1}),
+                            ("interior", {"interior_pass": stages, "boundary_terms": True})):
+        calls = []
+        for name in ("cell_records", "interior_pass", "boundary_faces", "boundary_terms"):
+            real = getattr(dgmpm, name)
+            monkeypatch.setattr(dgmpm, name, lambda *a, real=real, name=name: calls.append(name) or real(*a))
+        assert compile_helper.compile_step(load_scene(scene).with_overrides(overrides), False, share)
+        called = {name: calls.count(name) for name in set(calls)}
+        if "boundary_terms" in called:                  # the boundary's terms after it: called, how often aside
+            called["boundary_terms"] = True
+        assert called == expected, share
 
 
 def test_a_scene_too_large_for_two_set_ups_compiles_alone(monkeypatch):
