@@ -253,9 +253,9 @@ class _LawPass(Exception):
 def compile_step(scene, resumed=False, share="step"):
     """Build ``scene`` and step it once on a placeholder initial state, up to the law's pass: the
     kernels of what comes before it compiled (and cached) with the real step's argument types.
-    ``share`` (`shares`): "step", all of them; "boundary", DGMPM's cell records and boundary faces
-    only (the interior faces' passes skipped, their outputs placeholders; the step ends after the
-    boundary faces); "interior", all but those two.
+    ``share`` (`shares`): "step", all of them; "boundary", DGMPM's cell records, boundary faces
+    and the rest of the first stage (the interior faces' passes skipped, their outputs
+    placeholders, `_split_faces`); "interior", all but the records and the boundary faces.
     ``resumed``: as a resumed run's first step, whose state is not the initial one (DGMPM's face
     passes then read cell records made for it, `cell_records`, not those of the initial state).
     For the helper process only: it replaces the schemes' law pass at rest (and MPM's stress
@@ -306,8 +306,10 @@ def compile_step(scene, resumed=False, share="step"):
 def _split_faces(dgmpm, share, fill):
     """The face passes of DGMPM's step (names in `skdgmpm.dgmpm`) that the helper of ``share``
     leaves to the other (`shares`) replaced by placeholders that fill their outputs (the last of
-    their arguments) with ``fill``'s numbers and report no failure; with "boundary" the step ends
-    after the boundary faces' pass."""
+    their arguments) with ``fill``'s numbers and report no failure. "boundary" goes on after the
+    boundary faces to the end of the step's first stage (the law's pass, or RK2's law at the
+    nodes, which the other compiles): the Euler stage of the cells' records as they come (for a
+    placeholder state, not all recorded: the corrections gathered on the edges) compiled too."""
     def placeholder(outputs, returns=None):
         def skipped(*args):
             for a in args[len(args) - outputs:]:
@@ -316,15 +318,12 @@ def _split_faces(dgmpm, share, fill):
         return skipped
 
     if share == "boundary":
-        boundary_faces = dgmpm.boundary_faces
-
-        def boundary_then_stop(*args):
-            boundary_faces(*args)
+        def stop(*args, **kwargs):
             raise _LawPass
 
         # interior_pass(..., flux, G); cell_corrections(..., W, corr_bnd): W is G, in place
         dgmpm.interior_pass, dgmpm.cell_corrections = placeholder(2, -1), placeholder(1)
-        dgmpm.boundary_faces = boundary_then_stop
+        dgmpm.DGMPM.nodal_state = stop
     elif share == "interior":
         # cell_records(..., rec, state): the records as the helper filled them (`compile_step`),
         # every cell recorded in the first call (the CTU corrections as the cells send them: the

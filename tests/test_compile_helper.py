@@ -158,9 +158,10 @@ def test_a_dgmpm_step_on_the_nodes_is_shared_by_two_helpers(monkeypatch):
                          ids=["nodes", "rk2"])
 def test_each_share_compiles_its_own_face_passes_and_steps_past_the_others(scene, overrides, monkeypatch):
     """`compile_step` of each share in this process (what it patches put back afterwards): the
-    "boundary" helper calls the record pass and the boundary faces' pass and ends there, the
-    interior faces' pass a placeholder; the "interior" helper calls the interior faces' pass (in
-    both of RK2's stages) and reaches the law's pass, the record and boundary passes
+    "boundary" helper calls the record pass and the boundary faces' pass, then the boundary's
+    terms, and ends with the step's first stage (RK2: before its law at the nodes), the interior
+    faces' pass a placeholder; the "interior" helper calls the interior faces' pass (in both of
+    RK2's stages) and reaches the law's pass, the record and boundary faces' passes
     placeholders."""
     from skdgmpm import ader, dgmpm, riemann
     from skdgmpm.constitutive import MaterialSet
@@ -170,14 +171,17 @@ def test_each_share_compiles_its_own_face_passes_and_steps_past_the_others(scene
 
     for owner, name in ((GodunovScheme, "at_rest"), (GodunovScheme, "check"), (GodunovScheme, "constitutive_update"),
                         (MaterialSet, "stress_update"), (DGFEM, "evaluate_points"), (MPM, "strain_stress"),
-                        (ader, "_not_hyperbolic"), (dgmpm, "_not_hyperbolic"), (riemann, "_not_hyperbolic")):
+                        (ader, "_not_hyperbolic"), (dgmpm, "_not_hyperbolic"), (riemann, "_not_hyperbolic"),
+                        (dgmpm.DGMPM, "nodal_state")):
         monkeypatch.setattr(owner, name, getattr(owner, name))         # put back after the test
     stages = 2 if "method.integrator=rk2" in overrides else 1
-    for share, expected in (("boundary", {"cell_records": 1, "boundary_faces": 1}),
+    nodal_state = dgmpm.DGMPM.nodal_state
+    reals = {name: getattr(dgmpm, name) for name in ("cell_records", "interior_pass", "boundary_faces", "boundary_terms")}
+    for share, expected in (("boundary", {"cell_records": 1, "boundary_faces": 1, "boundary_terms": True}),
                             ("interior", {"interior_pass": stages, "boundary_terms": True})):
         calls = []
-        for name in ("cell_records", "interior_pass", "boundary_faces", "boundary_terms"):
-            real = getattr(dgmpm, name)
+        monkeypatch.setattr(dgmpm.DGMPM, "nodal_state", nodal_state)        # as the other share's process has it
+        for name, real in reals.items():
             monkeypatch.setattr(dgmpm, name, lambda *a, real=real, name=name: calls.append(name) or real(*a))
         assert compile_helper.compile_step(load_scene(scene).with_overrides(overrides), False, share)
         called = {name: calls.count(name) for name in set(calls)}
