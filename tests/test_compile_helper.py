@@ -169,18 +169,20 @@ def test_each_share_compiles_its_own_face_passes_and_steps_past_the_others(scene
     from skdgmpm.mpm import MPM
     from skdgmpm.scheme import GodunovScheme
 
+    passes = ("cell_records", "interior_pass", "boundary_faces", "boundary_terms")
     for owner, name in ((GodunovScheme, "at_rest"), (GodunovScheme, "check"), (GodunovScheme, "constitutive_update"),
                         (MaterialSet, "stress_update"), (DGFEM, "evaluate_points"), (MPM, "strain_stress"),
                         (ader, "_not_hyperbolic"), (dgmpm, "_not_hyperbolic"), (riemann, "_not_hyperbolic"),
-                        (dgmpm.DGMPM, "nodal_state")):
+                        (dgmpm.DGMPM, "nodal_state"), *((dgmpm, name) for name in (*passes, "cell_corrections"))):
         monkeypatch.setattr(owner, name, getattr(owner, name))         # put back after the test
     stages = 2 if "method.integrator=rk2" in overrides else 1
-    nodal_state = dgmpm.DGMPM.nodal_state
-    reals = {name: getattr(dgmpm, name) for name in ("cell_records", "interior_pass", "boundary_faces", "boundary_terms")}
+    nodal_state, corrections = dgmpm.DGMPM.nodal_state, dgmpm.cell_corrections
+    reals = {name: getattr(dgmpm, name) for name in passes}
     for share, expected in (("boundary", {"cell_records": 1, "boundary_faces": 1, "boundary_terms": True}),
                             ("interior", {"interior_pass": stages, "boundary_terms": True})):
         calls = []
-        monkeypatch.setattr(dgmpm.DGMPM, "nodal_state", nodal_state)        # as the other share's process has it
+        monkeypatch.setattr(dgmpm.DGMPM, "nodal_state", nodal_state)        # as the other share's process has them
+        monkeypatch.setattr(dgmpm, "cell_corrections", corrections)
         for name, real in reals.items():
             monkeypatch.setattr(dgmpm, name, lambda *a, real=real, name=name: calls.append(name) or real(*a))
         assert compile_helper.compile_step(load_scene(scene).with_overrides(overrides), False, share)
