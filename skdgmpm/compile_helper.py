@@ -40,7 +40,7 @@ import numpy as np
 
 from .cache_folders import locked
 
-ENV = "SKDGMPM_COMPILE_HELPER"
+ENV = "SKDGMPM_COMPILE_HELPER"  # "0": no helper; "1": one; unset (or any other value): as `shares` says
 MAX_POINTS = 2 ** 20            # a larger scene compiles alone: the helper's set-up would double its memory
 MAX_MESH_BYTES = 64 * 2 ** 20   # the same for a mesh file, by its size (its cells unknown before it is read)
 # a DG cell of order P holds about 8 ((P + 1) / 2)^d times a particle's bytes (the bench at 256²:
