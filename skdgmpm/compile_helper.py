@@ -68,10 +68,11 @@ def shares(scene):
     step up to its law's pass; or, for a DGMPM step on the grid's nodes as the scene asks it (its
     face passes' trace path: `DGMPM.trace_path`), ("interior", "boundary"): the cell records' and
     the boundary faces' kernels in the second, the rest in the first, which the two helpers then
-    compile side by side ($SKDGMPM_COMPILE_HELPER=1: one helper always). A scene read wrong here
-    (a particle file of one particle per cell) costs only the balance: each helper builds the
-    scene and compiles what its step calls."""
-    if os.environ.get(ENV) == "1" or scene.get("method.name", "dgmpm") != "dgmpm":
+    compile side by side ($SKDGMPM_COMPILE_HELPER=1: one helper always; nor above half the
+    limits of `wanted`: each helper builds the whole scene). A scene read wrong here (a particle
+    file of one particle per cell) costs only the balance: each helper builds the scene and
+    compiles what its step calls."""
+    if os.environ.get(ENV) == "1" or scene.get("method.name", "dgmpm") != "dgmpm" or not _small(scene, 2):
         return ("step",)
     per_cell = scene.get("particles.per_cell", 1)
     per_axis = len(per_cell) if isinstance(per_cell, list) else per_cell
@@ -80,18 +81,20 @@ def shares(scene):
     return ("interior", "boundary") if nodal else ("step",)
 
 
-def _small(scene):
+def _small(scene, helpers=1):
+    """Whether ``helpers`` set-ups of ``scene`` beside the run's stay within `MAX_POINTS` and
+    `MAX_MESH_BYTES` (each counted once per helper)."""
     try:
         d, order = scene.dim, int(scene.get("method.order", 1))
         dg = scene.get("method.name", "dgmpm") in DG_METHODS
         scale = 8 * ((order + 1) / 2) ** d if dg else 1.0
         files = [scene.get(key) for key in ("grid.mesh", "particles.file") if scene.get(key) is not None]
         if files:
-            return all(os.path.getsize(scene.resolve(f)) * scale <= MAX_MESH_BYTES for f in files)
+            return all(os.path.getsize(scene.resolve(f)) * scale * helpers <= MAX_MESH_BYTES for f in files)
         per_cell = scene.get("particles.per_cell", 1)
         # a DG scene: its cells' bytes (ADER-DGMPM's particles are fewer), else its particles'
         points = 1 if dg else (len(per_cell) if isinstance(per_cell, list) else int(per_cell)) ** d
-        return float(np.prod(np.asarray(scene.get("grid.cells"), dtype=float))) * points * scale <= MAX_POINTS
+        return float(np.prod(np.asarray(scene.get("grid.cells"), dtype=float))) * points * scale * helpers <= MAX_POINTS
     except (OSError, TypeError, ValueError):    # the build says what is wrong
         return False
 

@@ -140,6 +140,7 @@ def test_a_dgmpm_step_on_the_nodes_is_shared_by_two_helpers(monkeypatch):
     face passes' trace path: two helpers share its step; every other step takes one, as does any
     run with $SKDGMPM_COMPILE_HELPER=1; a run's helpers are one per share."""
     monkeypatch.delenv(compile_helper.ENV, raising=False)
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
     bar = load_scene("bar_elastic_1d")
     for taken, shares in (([], ("step",)), (["particles.per_cell=2"], ("interior", "boundary")),
                           (["particles.per_cell=[0.5]"], ("step",)), (["particles.per_cell=[0.25, 0.75]"], ("interior", "boundary")),
@@ -151,6 +152,12 @@ def test_a_dgmpm_step_on_the_nodes_is_shared_by_two_helpers(monkeypatch):
     assert [h.share for h in compile_helper.CompileHelpers(wave).helpers] == ["interior", "boundary"]
     monkeypatch.setenv(compile_helper.ENV, "1")
     assert compile_helper.shares(wave) == ("step",)
+    monkeypatch.delenv(compile_helper.ENV)
+    nodal = bar.with_overrides(["particles.per_cell=2"])          # two set-ups beside the run's: half the limit
+    assert compile_helper.shares(nodal.with_overrides([f"grid.cells={compile_helper.MAX_POINTS // 4}"])) == (
+        "interior", "boundary")
+    assert compile_helper.shares(nodal.with_overrides([f"grid.cells={compile_helper.MAX_POINTS // 4 + 1}"])) == ("step",)
+    assert compile_helper.wanted(nodal.with_overrides([f"grid.cells={compile_helper.MAX_POINTS // 4 + 1}"]))
 
 
 @pytest.mark.parametrize("scene, overrides", [("standing_wave_2d", ["grid.cells=[4, 4]"]),
