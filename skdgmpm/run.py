@@ -215,7 +215,7 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
         outdir.check(out, force, resume=saved is not None)
     begin = time.perf_counter()
     show = progress if notice is None else notice
-    # on the first compilation, a second process compiles the rest of the step meanwhile
+    # on the first compilation, one or two more processes compile the rest of the step meanwhile
     helper = compile_helper.CompileHelpers(scene, saved is not None) if compile_helper.wanted(scene) else None
     notice = (compile_notice(scene.get("method.name", "dgmpm"), scene.dim, on_first=helper and helper.start,
                              show=show) if show or helper else nullcontext())
