@@ -72,13 +72,22 @@ def shares(scene):
     limits of `wanted`: each helper builds the whole scene). A scene read wrong here (a particle
     file of one particle per cell) costs only the balance: each helper builds the scene and
     compiles what its step calls."""
-    if os.environ.get(ENV) == "1" or scene.get("method.name", "dgmpm") != "dgmpm" or not _small(scene, 2):
+    if os.environ.get(ENV) == "1" or not nodal(scene) or not _small(scene, 2):
         return ("step",)
+    return ("interior", "boundary")
+
+
+def nodal(scene):
+    """Whether ``scene`` asks for a DGMPM step on the grid's nodes (`DGMPM.trace_path`: any
+    layout but one particle a cell with forward Euler), read from its keys before it is built: a
+    `particles.per_cell` other than one a direction, a particle file, `method.integrator` other
+    than euler, or `method.layout = "nodes"`."""
+    if scene.get("method.name", "dgmpm") != "dgmpm":
+        return False
     per_cell = scene.get("particles.per_cell", 1)
     per_axis = len(per_cell) if isinstance(per_cell, list) else per_cell
-    nodal = (per_axis != 1 or scene.get("particles.file") is not None or scene.get("method.integrator", "euler") != "euler"
-             or scene.get("method.layout", "auto") == "nodes")
-    return ("interior", "boundary") if nodal else ("step",)
+    return (per_axis != 1 or scene.get("particles.file") is not None or scene.get("method.integrator", "euler") != "euler"
+            or scene.get("method.layout", "auto") == "nodes")
 
 
 def _small(scene, helpers=1):

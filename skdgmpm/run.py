@@ -217,8 +217,9 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
     show = progress if notice is None else notice
     # on the first compilation, one or two more processes compile the rest of the step meanwhile
     helper = compile_helper.CompileHelpers(scene, saved is not None) if compile_helper.wanted(scene) else None
-    notice = (compile_notice(scene.get("method.name", "dgmpm"), scene.dim, on_first=helper and helper.start,
-                             show=show) if show or helper else nullcontext())
+    kind = scene.get("method.name", "dgmpm") + (" on the nodes" if compile_helper.nodal(scene) else "")
+    notice = (compile_notice(kind, scene.dim, on_first=helper and helper.start, show=show) if show or helper
+              else nullcontext())
     try:
         with notice:                      # a line on stderr if the kernels are not in the cache
             disc = build(scene)
