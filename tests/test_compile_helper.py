@@ -163,9 +163,30 @@ def test_a_dgmpm_step_on_the_nodes_is_shared_by_two_helpers(monkeypatch):
     assert compile_helper.wanted(nodal.with_overrides([f"grid.cells={compile_helper.MAX_POINTS // 4 + 1}"]))
 
 
+@pytest.fixture
+def put_back(monkeypatch):
+    """Every class attribute and module name that `compile_step` may replace, of any share, put
+    back after the test: a placeholder left behind runs in every later test (one did: 30 CTU
+    tests failed after it)."""
+    from skdgmpm import ader, dgmpm, riemann
+    from skdgmpm.constitutive import MaterialSet
+    from skdgmpm.dgfem import DGFEM
+    from skdgmpm.mpm import MPM
+    from skdgmpm.scheme import GodunovScheme
+
+    for owner, name in ((GodunovScheme, "at_rest"), (GodunovScheme, "check"), (GodunovScheme, "constitutive_update"),
+                        (MaterialSet, "stress_update"), (DGFEM, "evaluate_points"), (MPM, "strain_stress"),
+                        (ader, "_not_hyperbolic"), (dgmpm, "_not_hyperbolic"), (riemann, "_not_hyperbolic"),
+                        (dgmpm.DGMPM, "nodal_state"),
+                        *((dgmpm, name) for name in ("cell_records", "interior_pass", "cell_corrections",
+                                                     "boundary_faces", "boundary_terms"))):
+        monkeypatch.setattr(owner, name, getattr(owner, name))
+
+
 @pytest.mark.parametrize("scene, overrides", [("standing_wave_2d", ["grid.cells=[4, 4]"]),
                                               ("plate_impact_neohookean_2d", ["grid.cells=[8, 6]", "method.integrator=rk2"])],
                          ids=["nodes", "rk2"])
+@pytest.mark.usefixtures("put_back")
 def test_each_share_compiles_its_own_face_passes_and_steps_past_the_others(scene, overrides, monkeypatch):
     """`compile_step` of each share in this process (what it patches put back afterwards): the
     "boundary" helper calls the record pass and the boundary faces' pass, then the boundary's
@@ -173,18 +194,9 @@ def test_each_share_compiles_its_own_face_passes_and_steps_past_the_others(scene
     faces' pass a placeholder; the "interior" helper calls the interior faces' pass (in both of
     RK2's stages) and reaches the law's pass, the record and boundary faces' passes
     placeholders."""
-    from skdgmpm import ader, dgmpm, riemann
-    from skdgmpm.constitutive import MaterialSet
-    from skdgmpm.dgfem import DGFEM
-    from skdgmpm.mpm import MPM
-    from skdgmpm.scheme import GodunovScheme
+    from skdgmpm import dgmpm
 
     passes = ("cell_records", "interior_pass", "boundary_faces", "boundary_terms")
-    for owner, name in ((GodunovScheme, "at_rest"), (GodunovScheme, "check"), (GodunovScheme, "constitutive_update"),
-                        (MaterialSet, "stress_update"), (DGFEM, "evaluate_points"), (MPM, "strain_stress"),
-                        (ader, "_not_hyperbolic"), (dgmpm, "_not_hyperbolic"), (riemann, "_not_hyperbolic"),
-                        (dgmpm.DGMPM, "nodal_state"), *((dgmpm, name) for name in (*passes, "cell_corrections"))):
-        monkeypatch.setattr(owner, name, getattr(owner, name))         # put back after the test
     stages = 2 if "method.integrator=rk2" in overrides else 1
     nodal_state, corrections = dgmpm.DGMPM.nodal_state, dgmpm.cell_corrections
     reals = {name: getattr(dgmpm, name) for name in passes}
@@ -282,21 +294,14 @@ def test_two_merges_into_one_cache_never_interleave(tmp_path):
 
 
 @pytest.mark.parametrize("resumed", [False, True])
+@pytest.mark.usefixtures("put_back")
 def test_the_placeholder_step_reaches_the_law_pass_and_a_resumed_one_makes_the_records(resumed, monkeypatch):
     """`compile_step` in this process (the classes it patches put back afterwards): the step
     reaches the law's pass; as a resumed run's first step, whose state is not the initial one,
     it calls the record pass (`cell_records`) that such a step calls, and otherwise not (the
     initial state's law pass wrote the records)."""
-    from skdgmpm import ader, dgmpm, riemann
-    from skdgmpm.constitutive import MaterialSet
-    from skdgmpm.dgfem import DGFEM
-    from skdgmpm.mpm import MPM
-    from skdgmpm.scheme import GodunovScheme
+    from skdgmpm import dgmpm
 
-    for owner, name in ((GodunovScheme, "at_rest"), (GodunovScheme, "check"), (GodunovScheme, "constitutive_update"),
-                        (MaterialSet, "stress_update"), (DGFEM, "evaluate_points"), (MPM, "strain_stress"),
-                        (ader, "_not_hyperbolic"), (dgmpm, "_not_hyperbolic"), (riemann, "_not_hyperbolic")):
-        monkeypatch.setattr(owner, name, getattr(owner, name))         # put back after the test
     calls, records = [], dgmpm.cell_records
     monkeypatch.setattr(dgmpm, "cell_records", lambda *a: calls.append(1) or records(*a))
     assert compile_helper.compile_step(load_scene("plate_impact_neohookean_2d").with_overrides(["grid.cells=[8, 6]"]),
