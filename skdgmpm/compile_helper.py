@@ -84,10 +84,15 @@ def nodal(scene):
     than euler, or `method.layout = "nodes"`."""
     if scene.get("method.name", "dgmpm") != "dgmpm":
         return False
+    return (_per_axis(scene) != 1 or scene.get("particles.file") is not None
+            or scene.get("method.integrator", "euler") != "euler" or scene.get("method.layout", "auto") == "nodes")
+
+
+def _per_axis(scene):
+    """Particles per cell and direction as `particles.per_cell` gives them (a count, or a list of
+    positions), unchecked: the build says what is wrong."""
     per_cell = scene.get("particles.per_cell", 1)
-    per_axis = len(per_cell) if isinstance(per_cell, list) else per_cell
-    return (per_axis != 1 or scene.get("particles.file") is not None or scene.get("method.integrator", "euler") != "euler"
-            or scene.get("method.layout", "auto") == "nodes")
+    return len(per_cell) if isinstance(per_cell, list) else per_cell
 
 
 def _small(scene, helpers=1):
@@ -100,9 +105,8 @@ def _small(scene, helpers=1):
         files = [scene.get(key) for key in ("grid.mesh", "particles.file") if scene.get(key) is not None]
         if files:
             return all(os.path.getsize(scene.resolve(f)) * scale * helpers <= MAX_MESH_BYTES for f in files)
-        per_cell = scene.get("particles.per_cell", 1)
         # a DG scene: its cells' bytes (ADER-DGMPM's particles are fewer), else its particles'
-        points = 1 if dg else (len(per_cell) if isinstance(per_cell, list) else int(per_cell)) ** d
+        points = 1 if dg else int(_per_axis(scene)) ** d
         return float(np.prod(np.asarray(scene.get("grid.cells"), dtype=float))) * points * scale * helpers <= MAX_POINTS
     except (OSError, TypeError, ValueError):    # the build says what is wrong
         return False
