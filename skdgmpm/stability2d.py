@@ -1,0 +1,191 @@
+"""Linear stability of the 2D DGMPM step, read off the engine's own step.
+
+R18 gives a von Neumann analysis in 1D only (§6; `skdgmpm.stability`) and set the 2D CFL of
+DCU to 0.7 "by testing" (§7.3). Here the analysis is the step itself: on a uniform grid of
+square cells, every cell with the same particle layout and a linear elastic material at rest,
+one step is a linear map of the particles' U that commutes with shifts by whole cells. Its
+Bloch symbol ``G(theta) = sum_r R_r exp(-i theta . r)`` (``6 npc x 6 npc``) has as blocks
+``R_r`` the response of the cell at offset ``r`` to a unit change of one particle component
+in a centre cell, one `DGMPM.step` per component on a small grid whose boundary the centre's
+domain of dependence does not reach (a CTU step couples a cell with its eight neighbours, a
+two-stage step with those at offset two). The step is stable when the spectral radius of
+``G(theta)`` is at most 1 for every ``theta``; the CFL limit is found by bisection.
+
+Units are free (the limit depends on the layout, the integrator, the transverse corrections
+and Poisson's ratio only: the CFL counts cells crossed by the P wave). `skdgmpm run` reads the
+limits of the regular layouts from ``stability_2d.json`` (`limit`), written by
+``python -m skdgmpm.stability2d`` (a few minutes): the analysis itself compiles the linear law's
+step, which a run of another law should not wait for.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["critical_cfl", "limit", "spectral_radius", "step_blocks", "table"]
+
+#: The limits `skdgmpm run` checks a 2D DGMPM scene against (`table`, `limit`).
+TABLE = Path(__file__).with_name("stability_2d.json")
+#: Poisson's ratios of the table; a ratio between two reads the lower limit of the two.
+NUS = (0.0, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45, 0.49)
+PER_CELL = (1, 2, 3)            # particles a direction, at (k + 1/2) / n: `particles.per_cell = n`
+
+#: Cells a side of the analysed grid: a response reaches offset 2, its boundary lies at 3 or more.
+N_CELLS = 9
+_EPS = 1e-3          # the perturbation: the law is linear, so any size that keeps J > 0 reads R exactly
+
+
+def _scene(per_cell, integrator, transverse, nu, layout, cfl):
+    from .scene import Scene
+
+    data = {
+        "dim": 2,
+        "grid": {"size": [1.0, 1.0], "cells": [N_CELLS, N_CELLS]},
+        "particles": {"per_cell": [float(x) for x in per_cell] if np.ndim(per_cell) else int(per_cell)},
+        "material": {"law": "linear_elastic", "E": 1.0, "nu": float(nu), "rho": 1.0},
+        "bc": {side: {"kind": "symmetry"} for side in ("left", "right", "bottom", "top")},
+        "method": {"name": "dgmpm", "integrator": integrator, "transverse": transverse, "layout": layout,
+                   "cfl": float(cfl), "cfl_above_limit": True, "cfl_guard": "largest"},
+        "run": {"t_end": 1.0},
+    }
+    return Scene.from_dict(data, "stability2d")
+
+
+def step_blocks(per_cell=1, integrator="euler", transverse="ctu", cfl=1.0, nu=0.3, layout="auto"):
+    """The blocks ``R_r`` of one DGMPM step's Bloch symbol.
+
+    Returns
+    -------
+    dict
+        ``{(rx, ry): ndarray (6 npc, 6 npc)}`` for offsets ``|rx|, |ry| <= 2``: row ``6 a + i``
+        is component ``i`` of particle ``a`` of the cell at that offset after the step, column
+        ``6 b + k`` component ``k`` of particle ``b`` of the centre cell before it; particles of
+        a cell in the order of their (y, x) position in it.
+    """
+    from .build import build
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")           # the CFL may lie above the 1D limit: that is the point
+        disc = build(_scene(per_cell, integrator, transverse, nu, layout, cfl))
+    stepper, X = disc.stepper, disc.particles.X
+    h = 1.0 / N_CELLS
+    cell = np.floor(X / h).astype(int)
+    local = X / h - cell
+    c = N_CELLS // 2
+
+    def points(ix, iy):
+        idx = np.flatnonzero((cell[:, 0] == ix) & (cell[:, 1] == iy))
+        return idx[np.lexsort((local[idx, 0], local[idx, 1]))]
+
+    F0, v0 = np.tile(np.eye(2), (len(X), 1, 1)), np.zeros((len(X), 2))
+    base = stepper.step(stepper.initial_state(F0, v0))
+    centre = points(c, c)
+    npc = len(centre)
+    offsets = [(rx, ry) for rx in range(-2, 3) for ry in range(-2, 3)]
+    rows = {r: points(c + r[0], c + r[1]) for r in offsets}
+    blocks = {r: np.zeros((6 * npc, 6 * npc)) for r in offsets}
+    for b, p in enumerate(centre):
+        for k in range(6):
+            F, v = F0.copy(), v0.copy()
+            if k < 4:
+                F[p, k // 2, k % 2] += _EPS
+            else:
+                v[p, k - 4] += _EPS / disc.particles.rho0[p]
+            new = stepper.step(stepper.initial_state(F, v))
+            if new.t != base.t:
+                raise RuntimeError(f"the step's time step changed with the state ({new.t} != {base.t})")
+            for r, idx in rows.items():
+                blocks[r][:, 6 * b + k] = ((new.U[idx] - base.U[idx]) / _EPS).ravel()
+    return blocks
+
+
+def spectral_radius(blocks, n_theta=32, theta=None):
+    """Largest ``|eigenvalue|`` of ``G(theta)`` over an ``n_theta x n_theta`` grid of wave
+    numbers, or over the wave numbers ``theta`` (k, 2) given."""
+    if theta is None:
+        grid = np.linspace(-np.pi, np.pi, n_theta, endpoint=False)
+        theta = np.stack([g.ravel() for g in np.meshgrid(grid, grid, indexing="ij")], axis=1)
+    theta = np.asarray(theta, dtype=float).reshape(-1, 2)
+    G = sum(B[None] * np.exp(-1j * (theta @ np.asarray(r, dtype=float)))[:, None, None] for r, B in blocks.items())
+    return float(np.abs(np.linalg.eigvals(G)).max())
+
+
+def bracket(per_cell=1, integrator="euler", transverse="ctu", nu=0.3, layout="auto", lo=0.2, hi=1.4, tol=2e-3,
+            n_theta=32):
+    """(lo, hi): the step is stable at CFL ``lo`` and unstable at ``hi`` (``hi - lo <= tol``),
+    by bisection; stable means a spectral radius of at most 1 + 1e-9 (the blocks are exact to
+    rounding: 1 + 3e-13 where the limit is reached exactly)."""
+    def stable(cfl):
+        return spectral_radius(step_blocks(per_cell, integrator, transverse, cfl, nu, layout), n_theta) <= 1 + 1e-9
+
+    while hi - lo > tol:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if stable(mid) else (lo, mid)
+    return lo, hi
+
+
+@functools.lru_cache(maxsize=64)
+def critical_cfl(per_cell=1, integrator="euler", transverse="ctu", nu=0.3, layout="auto", tol=2e-3):
+    """Largest CFL found stable (within ``tol`` of the limit, below it)."""
+    return bracket(per_cell, integrator, transverse, nu, layout, tol=tol)[0]
+
+
+def _key(per_cell, integrator, transverse):
+    return f"{per_cell} {integrator} {transverse}"
+
+
+def table(per_cells=PER_CELL, nus=NUS, progress=print):
+    """{"nu": nus, "limits": {"n integrator transverse": [[lo, hi] per nu]}} for every regular
+    layout, integrator and transverse correction."""
+    limits = {}
+    for n in per_cells:
+        for integrator in ("euler", "rk2"):
+            for transverse in ("ctu", "dcu"):
+                key = _key(n, integrator, transverse)
+                limits[key] = [[round(x, 6) for x in bracket(n, integrator, transverse, nu)] for nu in nus]
+                progress(f"{key}: " + " ".join(f"{lo:.3f}" for lo, _ in limits[key]))
+    return {"about": "CFL limits of 2D DGMPM (skdgmpm.stability2d): per layout 'n integrator transverse', "
+                     "one [stable, unstable] CFL pair per Poisson's ratio",
+            "nu": list(nus), "limits": limits}
+
+
+@functools.lru_cache(maxsize=1)
+def _table():
+    return json.loads(TABLE.read_text(encoding="utf-8"))
+
+
+def limit(per_cell, integrator, transverse, nus):
+    """(stable, unstable) CFL of a regular layout with ``per_cell`` particles a direction and
+    materials of Poisson's ratios ``nus``, from the table: the lowest over the materials and,
+    for a ratio between two of the table's, over both. None where the table has no entry."""
+    data = _table()
+    rows = data["limits"].get(_key(per_cell, integrator, transverse))
+    grid = np.asarray(data["nu"])
+    if rows is None or not nus or any(not grid[0] <= nu <= grid[-1] for nu in nus):
+        return None
+    pairs = []
+    for nu in nus:
+        k = int(np.searchsorted(grid, nu))
+        pairs += [rows[k]] if grid[k] == nu else [rows[k - 1], rows[k]]
+    return min(pairs, key=lambda pair: pair[1])
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog="python -m skdgmpm.stability2d",
+                                     description="Write the CFL limits of 2D DGMPM that skdgmpm run checks.")
+    parser.add_argument("--out", type=Path, default=TABLE, help=f"JSON file (default {TABLE})")
+    args = parser.parse_args(argv)
+    data = table()
+    args.out.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

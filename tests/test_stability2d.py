@@ -1,0 +1,98 @@
+"""Linear stability of the 2D DGMPM step (skdgmpm.stability2d) and the run's check against it."""
+
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+from skdgmpm import stability as st1
+from skdgmpm import stability2d as st
+from skdgmpm.cli import main
+from skdgmpm.errors import InputError
+from skdgmpm.run import run
+
+ALONG_X = np.stack([np.linspace(-np.pi, np.pi, 64, endpoint=False), np.zeros(64)], axis=1)
+
+
+def test_ctu_with_one_particle_a_cell_reaches_cfl_one():
+    """R18 §4.4, §7.4: the transverse corrections lift the 2D CFL of one particle a cell to 1:
+    the step at CFL 1 amplifies no mode (to rounding), at 1.02 one grows."""
+    assert st.spectral_radius(st.step_blocks(1, "euler", "ctu", 1.0)) <= 1 + 1e-9
+    assert st.spectral_radius(st.step_blocks(1, "euler", "ctu", 1.02)) > 1.01
+
+
+@pytest.mark.parametrize("per_cell, integrator, transverse", [
+    (1, "euler", "ctu"), (1, "euler", "dcu"), (2, "euler", "dcu"), (2, "rk2", "dcu"), (3, "euler", "dcu")])
+def test_modes_along_x_have_the_limit_of_the_1d_analysis(per_cell, integrator, transverse):
+    """Independent computation: a mode constant in y meets no jump across the horizontal faces, so
+    the 2D DCU step acts on it as the 1D step of the same layout, whose limit `skdgmpm.stability`
+    builds from R18's matrices for scalar advection (P and S waves each advect at their speed,
+    the P wave sets the CFL). So does CTU's with one particle a cell: the corrections an x-face
+    sends through a cell's bottom and top faces are equal, and one particle averages its nodes.
+    (With several, the corrections give the cell a slope in y: CTU's plane modes have a lower
+    limit than 1D's, 2 x 2 Euler 1.0005 at 0.69.) Stable at the 1D limit, unstable 0.02 above it."""
+    layout = list((np.arange(per_cell) + 0.5) / per_cell)
+    limit = st1.critical_cfl(layout, integrator, criterion="spectral")
+    below = st.spectral_radius(st.step_blocks(per_cell, integrator, transverse, limit - 1e-3), theta=ALONG_X)
+    above = st.spectral_radius(st.step_blocks(per_cell, integrator, transverse, limit + 0.02), theta=ALONG_X)
+    assert below <= 1 + 1e-9 < 1 + 1e-4 < above
+
+
+@pytest.mark.parametrize("key, nu", [("1 euler dcu", 0.3), ("1 rk2 ctu", 0.3), ("1 rk2 ctu", 0.0),
+                                     ("2 rk2 dcu", 0.49)])
+def test_the_table_the_run_reads_is_what_the_analysis_computes(key, nu):
+    """stability_2d.json (python -m skdgmpm.stability2d) against the analysis run again."""
+    table = json.loads(st.TABLE.read_text(encoding="utf-8"))
+    stored = table["limits"][key][table["nu"].index(nu)]
+    n, integrator, transverse = key.split()
+    assert st.bracket(int(n), integrator, transverse, nu) == pytest.approx(stored, abs=1e-6)
+
+
+def test_the_table_says_what_the_2d_analysis_found():
+    """Euler with CTU and RK2 with DCU reach 1 with one particle a cell; DCU with Euler and CTU
+    with RK2 do not: R18's 0.7 for DCU (§7.3, "by testing") lies above DCU's limit."""
+    nus = [0.0, 0.3, 0.45]
+    assert all(st.limit(1, "euler", "ctu", [nu])[1] > 1.0 for nu in nus)
+    assert all(st.limit(1, "rk2", "dcu", [nu])[1] > 1.0 for nu in nus)
+    assert all(st.limit(1, "euler", "dcu", [nu])[0] < 0.7 for nu in nus)
+    assert all(st.limit(1, "rk2", "ctu", [nu])[0] < 0.76 for nu in nus)
+    # between two ratios of the table, and over two materials: the lower limit
+    assert st.limit(1, "rk2", "ctu", [0.32]) == min(st.limit(1, "rk2", "ctu", [0.3]), st.limit(1, "rk2", "ctu", [0.35]),
+                                                   key=lambda pair: pair[1])
+    assert st.limit(1, "euler", "dcu", [0.3, 0.45]) == st.limit(1, "euler", "dcu", [0.45])
+    assert st.limit(1, "euler", "dcu", [0.495]) is None and st.limit(4, "euler", "dcu", [0.3]) is None
+
+
+@pytest.mark.parametrize("overrides, unstable", [
+    (['method.transverse="dcu"', "method.cfl=0.64"], False),
+    (['method.transverse="dcu"', "method.cfl=0.7"], True),
+    (['method.transverse="ctu"', 'method.integrator="rk2"', "method.cfl=0.72"], False),
+    (['method.transverse="ctu"', 'method.integrator="rk2"', "method.cfl=0.8"], True),
+])
+def test_a_run_above_the_2d_limit_blows_up_and_below_it_does_not(overrides, unstable):
+    """The analysis predicts runs: the linear standing wave (symmetry on every side, one particle
+    a cell, nu = 0.3) for 500 steps. Above the limit (DCU 0.651, RK2 with CTU 0.748) rounding
+    seeds the growing checkerboard and the energy guard stops the run; below it the run ends."""
+    keys = ["particles.per_cell=1", "method.cfl_above_limit=true", "run.frames=1", *overrides]
+    cfl = float(overrides[-1].split("=")[1])
+    c_p = np.sqrt(2e11 * 0.7 / (1.3 * 0.4) / 7800)
+    keys.append(f"run.t_end={float(500 * cfl * 0.1 / c_p)!r}")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r = run("standing_wave_2d", keys, progress=False)
+    if unstable:
+        assert r.status == "unstable" and "energy created" in r.message and r.state.step < 480, r.message
+    else:
+        assert r.status == "ok" and r.state.step >= 499
+
+
+def test_the_command_prints_the_2d_limits(capsys):
+    assert main(["stability", "--dim", "2", "--per-cell", "1", "--nu", "0.3", "--json"]) == 0
+    out = capsys.readouterr().out
+    limits = json.loads(out.strip().splitlines()[-1])["limits"]
+    assert limits["euler"]["ctu"] > 0.998 and limits["rk2"]["dcu"] > 0.998
+    assert limits["euler"]["dcu"] == pytest.approx(0.651, abs=3e-3)
+    assert limits["rk2"]["ctu"] == pytest.approx(0.748, abs=3e-3)
+    assert main(["stability"]) == 2
+    assert "error: skdgmpm stability: --layout is required in 1D" in capsys.readouterr().err
