@@ -15,7 +15,7 @@ CASES = [
     ("plane_wave_svk_2d", []),
     ("partial_impact_2d", []),
     ("plate_impact_neohookean_2d", ['method.transverse="ctu"', "method.cfl=1.0"]),
-    ("plate_impact_neohookean_2d", ['method.transverse="dcu"', "method.cfl=0.7"]),
+    ("plate_impact_neohookean_2d", ['method.transverse="dcu"', "method.cfl=0.7", "method.cfl_above_limit=true"]),
 ]
 
 

@@ -26,22 +26,50 @@ def _critical_cfl(layout, integrator):
     return critical_cfl(list(layout), integrator, criterion="spectral")
 
 
+def _poisson_ratios(scene):
+    """nu of every material table of the scene, None where one gives none."""
+    tables = [scene.data["material"], *(r.get("material", {}) for r in scene.get("regions") or [])]
+    nus = [t.get("nu") for t in tables]
+    return None if any(isinstance(nu, bool) or not isinstance(nu, (int, float)) for nu in nus) else nus
+
+
+def _dgmpm_limit(disc, coords):
+    """(CFL refused from, the limit, what it is) of a DGMPM layout: in 2D the von Neumann limit
+    of the 2D step from `skdgmpm.stability2d`'s table (regular layouts, materials that give nu),
+    else the 1D limit of the layout (R18 §6; in 2D an upper bound)."""
+    stepper, scene = disc.stepper, disc.scene
+    n = len(coords)
+    nus = _poisson_ratios(scene) if scene.dim == 2 else None
+    if nus is not None and np.allclose(coords, (np.arange(n) + 0.5) / n, rtol=0, atol=1e-9):
+        from .stability2d import limit as limit_2d
+        pair = limit_2d(n, stepper.integrator, stepper.transverse, nus)
+        if pair is not None:
+            stable, unstable = pair
+            return unstable, stable, (
+                f"the 2D von Neumann limit {stable:.3f} of {stepper.integrator} with {stepper.transverse}, "
+                f"{n} x {n} particles a cell, nu = {', '.join(f'{nu:g}' for nu in dict.fromkeys(nus))} "
+                f"(skdgmpm stability --dim 2 --per-cell {n})")
+    limit = _critical_cfl(coords, stepper.integrator)
+    return limit + 1e-6, limit, (f"the von Neumann limit {limit:.2f} of layout {list(coords)} with {stepper.integrator} "
+                                 f"(skdgmpm stability --layout ...)")
+
+
 def check_cfl(disc):
     """Refuse a CFL above the method's known stability limit (`skdgmpm.guards`): for DGMPM the
-    von Neumann limit of the particle layout (R18 §6; the 1D analysis applies per direction, in 2D
-    an upper bound, DCU needs less), for MPM 1. With ``method.cfl_above_limit = true`` a warning
-    only. Returns the limit, or None where none is known (DGFEM, ADER, a particle file)."""
+    von Neumann limit of its step, in 2D from the analysis of the 2D step (`skdgmpm.stability2d`:
+    regular layouts, every material with a Poisson's ratio), else the 1D limit of the particle
+    layout (R18 §6; in 2D an upper bound); for MPM 1. With ``method.cfl_above_limit = true`` a
+    warning only. Returns the limit, or None where none is known (DGFEM, ADER, a particle file)."""
     stepper, scene = disc.stepper, disc.scene
     if scene.data["method"].get("name", "dgmpm") == "mpm":
         limit, what = guards.mpm_limit(disc), "the MPM limit 1 (a wave or a particle crosses at most one cell a step)"
+        refused = limit + 1e-6
     elif disc.layout is not None:
         coords = tuple(float(c) for c in np.unique(np.round(disc.layout[:, 0], 12)))
-        limit = _critical_cfl(coords, stepper.integrator)
-        what = (f"the von Neumann limit {limit:.2f} of layout {list(coords)} with {stepper.integrator} "
-                f"(skdgmpm stability --layout ...)")
+        refused, limit, what = _dgmpm_limit(disc, coords)
     else:
         return None
-    if stepper.cfl > limit + 1e-6:
+    if stepper.cfl >= refused:
         text = f"{scene.where('method.cfl')} = {stepper.cfl} exceeds {what}"
         if not guards.allowed_above_limit(scene):
             raise InputError(f"{text}: the run would be unstable (method.cfl_above_limit = true runs it anyway)")

@@ -180,8 +180,8 @@ KEYS = (
         "MPM: current (wave speed of the current state) or bar (WG08's fixed step from the bar speed)",
         methods=("mpm",)),
     Key("method.cfl_above_limit", "", "false", "true",
-        "run a CFL above the method's known stability limit (DGMPM: the von Neumann limit of the layout, "
-        "MPM: 1) with a warning instead of refusing it; no effect where no limit is known"),
+        "run a CFL above the method's known stability limit (DGMPM: the von Neumann limit of its step, "
+        "in 2D `skdgmpm stability --dim 2`, else the layout's; MPM: 1) with a warning instead of refusing it; no effect where no limit is known"),
     Key("method.cfl_guard", "", '"predict"', '"largest"',
         "Godunov schemes: predict (the first attempt of a step divided by the wave speed-up foreseen from "
         "those of the last 16 steps and no longer than their CFL steps: rarely repeated) or largest (always the largest admissible step: CFL 1 exactness in 1D)",

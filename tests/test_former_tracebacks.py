@@ -50,7 +50,7 @@ def quads(here, points, cells, name="m.msh", kind="quad"):
     meshio.write(here / name, meshio.Mesh(np.asarray(points, float), [(kind, np.asarray(cells))]),
                  file_format="gmsh22", binary=False)
     scene = here / "s.toml"
-    scene.write_text(SCENE.format(mesh=name, method="dgmpm", extra=""))
+    scene.write_text(SCENE.format(mesh=name, method="dgmpm", extra="cfl = 0.5"))   # DCU: 2D limit 0.651
     return scene
 
 

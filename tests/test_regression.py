@@ -47,7 +47,7 @@ CASES = {
     "partial_impact_2d/dgmpm": ("partial_impact_2d", []),
     "plate_impact_neohookean_2d/dgmpm-ctu": ("plate_impact_neohookean_2d", []),
     "plate_impact_neohookean_2d/dgmpm-dcu": ("plate_impact_neohookean_2d", ['method.transverse="dcu"',
-                                                                           "method.cfl=0.7"]),
+                                                                           "method.cfl=0.7", "method.cfl_above_limit=true"]),
     "plate_impact_neohookean_2d/rk-dgfem-1": ("plate_impact_neohookean_2d", [
         'method.name="rk-dgfem"', 'method.integrator="rk2"', "method.cfl=0.4", "grid.cells=[12, 9]"]),
     "plate_impact_neohookean_2d/ader-dgmpm-1": ("plate_impact_neohookean_2d", [

@@ -87,6 +87,20 @@ def test_a_run_above_the_2d_limit_blows_up_and_below_it_does_not(overrides, unst
         assert r.status == "ok" and r.state.step >= 499
 
 
+def test_the_run_refuses_a_cfl_above_the_2d_limit():
+    """The neo-Hookean plate under RK2 at its scene's CFL 1: the 1D limit (1) let it through and
+    it inverted a cell at step 21; the 2D limit (0.748 at nu = 0.3) refuses it, naming both."""
+    with pytest.raises(InputError, match=r"method.cfl = 1.0 exceeds the 2D von Neumann limit 0.748 of rk2 with ctu, "
+                                         r"1 x 1 particles a cell, nu = 0.3"):
+        run("plate_impact_neohookean_2d", ['method.integrator="rk2"'], progress=False)
+
+
+def test_a_layout_the_table_lacks_falls_back_to_the_1d_limit():
+    """Shifted particles (not at (k + 1/2) / n): the 1D limit of the layout, per direction."""
+    with pytest.raises(InputError, match=r"exceeds the von Neumann limit .* of layout \[0.3, 0.7\]"):
+        run("standing_wave_2d", ["particles.per_cell=[0.3, 0.7]", "method.cfl=0.9"], progress=False)
+
+
 def test_the_command_prints_the_2d_limits(capsys):
     assert main(["stability", "--dim", "2", "--per-cell", "1", "--nu", "0.3", "--json"]) == 0
     out = capsys.readouterr().out
