@@ -124,19 +124,27 @@ def _stability_2d(args):
     if not -1.0 < args.nu < 0.5:
         raise InputError(f"skdgmpm stability: --nu {args.nu} must lie in (-1, 0.5)")
     n = args.per_cell
-    print(f"layout: {n} x {n} particles a cell at (k + 1/2) / {n}; nu = {args.nu:g}; first-order DGMPM, "
-          f"2D linear elasticity (the engine's own step, skdgmpm.stability2d; compiles the linear law's "
-          f"step on first use)")
-    print(f"{'method':<8}{'ctu':>8}{'dcu':>8}")
-    report = {}
-    for integrator in ("euler", "rk2"):
-        row = [stability2d.critical_cfl(n, integrator, t, args.nu) for t in ("ctu", "dcu")]
-        report[integrator] = dict(zip(("ctu", "dcu"), row))
-        print(f"{integrator:<8}" + "".join(f"{x:>8.3f}" for x in row))
+    print(f"{args.method}; {n} x {n} points a cell at (k + 1/2) / {n} (DGMPM, ADER-DGMPM: particles); "
+          f"nu = {args.nu:g}; 2D linear elasticity (the engine's own step, skdgmpm.stability2d; compiles "
+          f"the linear law's step on first use)")
+    if args.method == "dgmpm":
+        print(f"{'method':<8}{'ctu':>8}{'dcu':>8}")
+        report = {}
+        for integrator in ("euler", "rk2"):
+            row = [stability2d.critical_cfl(n, integrator, t, args.nu) for t in ("ctu", "dcu")]
+            report[integrator] = dict(zip(("ctu", "dcu"), row))
+            print(f"{integrator:<8}" + "".join(f"{x:>8.3f}" for x in row))
+    else:
+        method = {"name": args.method, "order": args.order}
+        if args.method == "rk-dgfem":
+            method["integrator"] = args.integrator or ("rk2" if args.order == 1 else "rk4")
+        report = {"order": args.order, **method, "cfl": stability2d.critical_cfl(n, nu=args.nu, method=method)}
+        print(f"order {args.order}{', ' + method['integrator'] if 'integrator' in method else ''}: "
+              f"CFL limit {report['cfl']:.3f} (the method's CFL: dt = CFL h / ((2P + 1) c) for P >= 1)")
     print("CFL limit: the largest CFL at which no Fourier mode of the step grows (to 0.002, below);")
-    print("  skdgmpm run refuses a 2D DGMPM CFL above it (method.cfl_above_limit = true runs it anyway).")
+    print("  skdgmpm run refuses a 2D CFL above it (method.cfl_above_limit = true runs it anyway).")
     if args.json:
-        print(json.dumps({"per_cell": n, "nu": args.nu, "limits": report}))
+        print(json.dumps({"method": args.method, "per_cell": n, "nu": args.nu, "limits": report}))
     return 0
 
 
@@ -400,6 +408,10 @@ def main(argv=None):
     p.add_argument("--dim", type=int, choices=(1, 2), default=1, help="2: the 2D step's limits (default 1)")
     p.add_argument("--per-cell", type=int, default=1, help="2D: particles a direction in a cell (default 1)")
     p.add_argument("--nu", type=float, default=0.3, help="2D: Poisson's ratio (default 0.3)")
+    p.add_argument("--method", default="dgmpm", choices=("dgmpm", "ader-dgmpm", "ader-dgfem", "rk-dgfem"),
+                   help="2D: the method whose step is analysed (default dgmpm: Euler / RK2 x CTU / DCU)")
+    p.add_argument("--order", type=int, default=1, help="2D: order P of ADER and RK-DGFEM (default 1)")
+    p.add_argument("--integrator", choices=("rk2", "rk4"), help="2D: RK-DGFEM's (default rk2 for P = 1, else rk4)")
     p.add_argument("--json", action="store_true", help="also print the report as JSON")
     p.set_defaults(func=_cmd_stability)
 

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["critical_cfl", "limit", "spectral_radius", "step_blocks", "table"]
+__all__ = ["bracket", "critical_cfl", "dgmpm", "limit", "spectral_radius", "step_blocks", "table"]
 
 #: The limits `skdgmpm run` checks a 2D DGMPM scene against (`table`, `limit`).
 TABLE = Path(__file__).with_name("stability_2d.json")
@@ -36,48 +36,64 @@ TABLE = Path(__file__).with_name("stability_2d.json")
 NUS = (0.0, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45, 0.49)
 PER_CELL = (1, 2, 3)            # particles a direction, at (k + 1/2) / n: `particles.per_cell = n`
 
-#: Cells a side of the analysed grid: a response reaches offset 2, its boundary lies at 3 or more.
-N_CELLS = 9
 _EPS = 1e-3          # the perturbation: the law is linear, so any size that keeps J > 0 reads R exactly
+#: Offsets a step's response reaches, by its stages (CTU couples a cell with its eight neighbours a
+#: stage; ADER's predictor is cell-local, its corrector one stage): the blocks are read to this
+#: offset, the ring beyond checked to be zero, the grid's boundary one ring further.
+REACH = {"euler": 1, "rk2": 2, "rk4": 4, "ader": 1}
 
 
-def _scene(per_cell, integrator, transverse, nu, layout, cfl):
+def dgmpm(integrator="euler", transverse="ctu", layout="auto"):
+    """The [method] table of first-order DGMPM."""
+    return {"name": "dgmpm", "integrator": integrator, "transverse": transverse, "layout": layout}
+
+
+def _reach(method):
+    return REACH["ader" if method["name"].startswith("ader") else method.get("integrator", "euler")]
+
+
+def _scene(method, per_cell, nu, cfl, n_cells):
     from .scene import Scene
 
     data = {
         "dim": 2,
-        "grid": {"size": [1.0, 1.0], "cells": [N_CELLS, N_CELLS]},
+        "grid": {"size": [1.0, 1.0], "cells": [n_cells, n_cells]},
         "particles": {"per_cell": [float(x) for x in per_cell] if np.ndim(per_cell) else int(per_cell)},
         "material": {"law": "linear_elastic", "E": 1.0, "nu": float(nu), "rho": 1.0},
         "bc": {side: {"kind": "symmetry"} for side in ("left", "right", "bottom", "top")},
-        "method": {"name": "dgmpm", "integrator": integrator, "transverse": transverse, "layout": layout,
-                   "cfl": float(cfl), "cfl_above_limit": True, "cfl_guard": "largest"},
+        "method": {**method, "cfl": float(cfl), "cfl_above_limit": True, "cfl_guard": "largest"},
         "run": {"t_end": 1.0},
     }
     return Scene.from_dict(data, "stability2d")
 
 
-def step_blocks(per_cell=1, integrator="euler", transverse="ctu", cfl=1.0, nu=0.3, layout="auto"):
-    """The blocks ``R_r`` of one DGMPM step's Bloch symbol.
+def step_blocks(per_cell=1, integrator="euler", transverse="ctu", cfl=1.0, nu=0.3, layout="auto", method=None):
+    """The blocks ``R_r`` of one step's Bloch symbol: first-order DGMPM with ``integrator``,
+    ``transverse`` and ``layout``, or the method of the [method] table ``method`` (ADER-DGMPM,
+    ADER-DGFEM, RK-DGFEM: its points are the particles or the Gauss points).
 
     Returns
     -------
     dict
-        ``{(rx, ry): ndarray (6 npc, 6 npc)}`` for offsets ``|rx|, |ry| <= 2``: row ``6 a + i``
-        is component ``i`` of particle ``a`` of the cell at that offset after the step, column
-        ``6 b + k`` component ``k`` of particle ``b`` of the centre cell before it; particles of
-        a cell in the order of their (y, x) position in it.
+        ``{(rx, ry): ndarray (6 npc, 6 npc)}`` for offsets up to the step's reach: row ``6 a + i``
+        is component ``i`` of point ``a`` of the cell at that offset after the step, column
+        ``6 b + k`` component ``k`` of point ``b`` of the centre cell before it; the points of a
+        cell in the order of their (y, x) position in it.
     """
     from .build import build
 
+    method = dict(method or dgmpm(integrator, transverse, layout))
+    reach = _reach(method)
+    n_cells = 2 * reach + 5
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")           # the CFL may lie above the 1D limit: that is the point
-        disc = build(_scene(per_cell, integrator, transverse, nu, layout, cfl))
-    stepper, X = disc.stepper, disc.particles.X
-    h = 1.0 / N_CELLS
+        disc = build(_scene(method, per_cell, nu, cfl, n_cells))
+    stepper = disc.stepper
+    points_, X = stepper.particles, stepper.particles.X
+    h = 1.0 / n_cells
     cell = np.floor(X / h).astype(int)
-    local = X / h - cell
-    c = N_CELLS // 2
+    local = np.round(X / h - cell, 9)      # rounded: the points of a cell sort alike in every cell
+    c = n_cells // 2
 
     def points(ix, iy):
         idx = np.flatnonzero((cell[:, 0] == ix) & (cell[:, 1] == iy))
@@ -87,7 +103,8 @@ def step_blocks(per_cell=1, integrator="euler", transverse="ctu", cfl=1.0, nu=0.
     base = stepper.step(stepper.initial_state(F0, v0))
     centre = points(c, c)
     npc = len(centre)
-    offsets = [(rx, ry) for rx in range(-2, 3) for ry in range(-2, 3)]
+    ring = reach + 1
+    offsets = [(rx, ry) for rx in range(-ring, ring + 1) for ry in range(-ring, ring + 1)]
     rows = {r: points(c + r[0], c + r[1]) for r in offsets}
     blocks = {r: np.zeros((6 * npc, 6 * npc)) for r in offsets}
     for b, p in enumerate(centre):
@@ -96,13 +113,16 @@ def step_blocks(per_cell=1, integrator="euler", transverse="ctu", cfl=1.0, nu=0.
             if k < 4:
                 F[p, k // 2, k % 2] += _EPS
             else:
-                v[p, k - 4] += _EPS / disc.particles.rho0[p]
+                v[p, k - 4] += _EPS / points_.rho0[p]
             new = stepper.step(stepper.initial_state(F, v))
             if new.t != base.t:
                 raise RuntimeError(f"the step's time step changed with the state ({new.t} != {base.t})")
             for r, idx in rows.items():
                 blocks[r][:, 6 * b + k] = ((new.U[idx] - base.U[idx]) / _EPS).ravel()
-    return blocks
+    beyond = max(np.abs(B).max() for r, B in blocks.items() if max(abs(r[0]), abs(r[1])) == ring)
+    if beyond > 1e-12:
+        raise RuntimeError(f"{method['name']}'s step reaches beyond offset {reach} ({beyond:.3g}): REACH is wrong")
+    return {r: B for r, B in blocks.items() if max(abs(r[0]), abs(r[1])) < ring}
 
 
 def spectral_radius(blocks, n_theta=32, theta=None):
@@ -117,12 +137,13 @@ def spectral_radius(blocks, n_theta=32, theta=None):
 
 
 def bracket(per_cell=1, integrator="euler", transverse="ctu", nu=0.3, layout="auto", lo=0.2, hi=1.4, tol=2e-3,
-            n_theta=32):
+            n_theta=32, method=None):
     """(lo, hi): the step is stable at CFL ``lo`` and unstable at ``hi`` (``hi - lo <= tol``),
     by bisection; stable means a spectral radius of at most 1 + 1e-9 (the blocks are exact to
     rounding: 1 + 3e-13 where the limit is reached exactly)."""
     def stable(cfl):
-        return spectral_radius(step_blocks(per_cell, integrator, transverse, cfl, nu, layout), n_theta) <= 1 + 1e-9
+        blocks = step_blocks(per_cell, integrator, transverse, cfl, nu, layout, method)
+        return spectral_radius(blocks, n_theta) <= 1 + 1e-9
 
     while hi - lo > tol:
         mid = 0.5 * (lo + hi)
@@ -130,10 +151,16 @@ def bracket(per_cell=1, integrator="euler", transverse="ctu", nu=0.3, layout="au
     return lo, hi
 
 
-@functools.lru_cache(maxsize=64)
-def critical_cfl(per_cell=1, integrator="euler", transverse="ctu", nu=0.3, layout="auto", tol=2e-3):
+def critical_cfl(per_cell=1, integrator="euler", transverse="ctu", nu=0.3, layout="auto", tol=2e-3, method=None):
     """Largest CFL found stable (within ``tol`` of the limit, below it)."""
-    return bracket(per_cell, integrator, transverse, nu, layout, tol=tol)[0]
+    frozen = None if method is None else tuple(sorted(method.items()))
+    per_cell = tuple(per_cell) if np.ndim(per_cell) else per_cell
+    return _critical_cfl(per_cell, integrator, transverse, nu, layout, tol, frozen)
+
+
+@functools.lru_cache(maxsize=64)
+def _critical_cfl(per_cell, integrator, transverse, nu, layout, tol, method):
+    return bracket(per_cell, integrator, transverse, nu, layout, tol=tol, method=method and dict(method))[0]
 
 
 def _key(per_cell, integrator, transverse):

@@ -64,6 +64,22 @@ def test_the_table_says_what_the_2d_analysis_found():
     assert st.limit(1, "euler", "dcu", [0.495]) is None and st.limit(4, "euler", "dcu", [0.3]) is None
 
 
+def _standing_wave_500_steps(keys, cfl, speed_factor, unstable):
+    """The linear standing wave (symmetry on every side, nu = 0.3) run for 500 steps of CFL
+    ``cfl`` (dt = cfl h / (speed_factor c_p)): stopped by the energy guard before step 480 where
+    ``unstable``, else at its end."""
+    c_p = np.sqrt(2e11 * 0.7 / (1.3 * 0.4) / 7800)
+    t_end = float(500 * cfl * 0.1 / (speed_factor * c_p))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r = run("standing_wave_2d", [*keys, "method.cfl_above_limit=true", "run.frames=1", f"run.t_end={t_end!r}"],
+                progress=False)
+    if unstable:
+        assert r.status == "unstable" and "energy created" in r.message and r.state.step < 480, r.message
+    else:
+        assert r.status == "ok" and r.state.step >= 499
+
+
 @pytest.mark.parametrize("overrides, unstable", [
     (['method.transverse="dcu"', "method.cfl=0.64"], False),
     (['method.transverse="dcu"', "method.cfl=0.7"], True),
@@ -74,17 +90,25 @@ def test_a_run_above_the_2d_limit_blows_up_and_below_it_does_not(overrides, unst
     """The analysis predicts runs: the linear standing wave (symmetry on every side, one particle
     a cell, nu = 0.3) for 500 steps. Above the limit (DCU 0.651, RK2 with CTU 0.748) rounding
     seeds the growing checkerboard and the energy guard stops the run; below it the run ends."""
-    keys = ["particles.per_cell=1", "method.cfl_above_limit=true", "run.frames=1", *overrides]
     cfl = float(overrides[-1].split("=")[1])
-    c_p = np.sqrt(2e11 * 0.7 / (1.3 * 0.4) / 7800)
-    keys.append(f"run.t_end={float(500 * cfl * 0.1 / c_p)!r}")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        r = run("standing_wave_2d", keys, progress=False)
-    if unstable:
-        assert r.status == "unstable" and "energy created" in r.message and r.state.step < 480, r.message
-    else:
-        assert r.status == "ok" and r.state.step >= 499
+    _standing_wave_500_steps(["particles.per_cell=1", *overrides], cfl, 1, unstable)
+
+
+@pytest.mark.parametrize("method, cfl, unstable", [
+    ({"name": "ader-dgfem", "order": 1}, 0.6, False),
+    ({"name": "ader-dgfem", "order": 1}, 0.7, True),
+    ({"name": "rk-dgfem", "order": 1, "integrator": "rk2"}, 0.63, False),
+    ({"name": "rk-dgfem", "order": 1, "integrator": "rk2"}, 0.7, True),
+])
+def test_the_dg_methods_limits_predict_their_runs(method, cfl, unstable):
+    """The same analysis on ADER-DGFEM and RK-DGFEM P1 (their points: the Gauss points; limits
+    0.620 and 0.651 at nu = 0.3, in their CFL: dt = CFL h / (3 c)), against the standing wave's
+    runs of 500 steps as above."""
+    limit = st.critical_cfl(1, nu=0.3, method=method)
+    assert (cfl > limit) == unstable
+    keys = [f'method.name="{method["name"]}"', "method.order=1", f"method.cfl={cfl}",
+            *([f'method.integrator="{method["integrator"]}"'] if "integrator" in method else [])]
+    _standing_wave_500_steps(keys, cfl, 3, unstable)
 
 
 def test_the_run_refuses_a_cfl_above_the_2d_limit():
@@ -108,5 +132,8 @@ def test_the_command_prints_the_2d_limits(capsys):
     assert limits["euler"]["ctu"] > 0.998 and limits["rk2"]["dcu"] > 0.998
     assert limits["euler"]["dcu"] == pytest.approx(0.651, abs=3e-3)
     assert limits["rk2"]["ctu"] == pytest.approx(0.748, abs=3e-3)
+    assert main(["stability", "--dim", "2", "--method", "ader-dgfem", "--json"]) == 0
+    out = capsys.readouterr().out
+    assert json.loads(out.strip().splitlines()[-1])["limits"]["cfl"] == pytest.approx(0.620, abs=3e-3)
     assert main(["stability"]) == 2
     assert "error: skdgmpm stability: --layout is required in 1D" in capsys.readouterr().err
