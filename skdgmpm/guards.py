@@ -24,9 +24,10 @@ guards stop it earlier (exit 3, like the other health stops), or refuse it befor
   reaching the limit during the run stops it.
 - **CFL above a known stability limit** (`stability_limit`): refused (exit 2) unless the scene sets
   ``method.cfl_above_limit = true``. Known limits: first-order DGMPM, the von Neumann limit of
-  the particle layout (R18 §6, `skdgmpm.stability`; in 2D an upper bound, DCU needs less); MPM,
-  1 (dt = h / (c + |v|)). The DGFEM and ADER steps are already scaled by 1 / (2P + 1), and the scene
-  admits CFL <= 2 for them.
+  its step (in 2D `skdgmpm.stability2d`'s table for regular layouts, else the layout's 1D limit,
+  R18 §6, `skdgmpm.stability`); ADER and RK-DGFEM in 2D, that of their 2D step (the same
+  table); MPM, 1 (dt = h / (c + |v|)). The DGFEM and ADER steps are already scaled by
+  1 / (2P + 1), and the scene admits CFL <= 2 for them.
 """
 import numpy as np
 

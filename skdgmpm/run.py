@@ -54,19 +54,48 @@ def _dgmpm_limit(disc, coords):
                                  f"(skdgmpm stability --layout ...)")
 
 
+def _dg_limit(disc):
+    """(CFL refused from, the limit, what it is) of a 2D DG step (ADER-DGFEM, ADER-DGMPM,
+    RK-DGFEM) from `skdgmpm.stability2d`'s table, or None: 1D, a material without nu, an order or
+    integrator the table lacks, ADER-DGMPM particles other than P + 1 a direction (with P + 1 its
+    reconstruction interpolates them, and its step has ADER-DGFEM's limits), a particle file."""
+    from .stability2d import dg_key, dg_limit
+
+    stepper, scene = disc.stepper, disc.scene
+    name, order = scene.data["method"].get("name", "dgmpm"), stepper.order
+    nus = _poisson_ratios(scene) if scene.dim == 2 else None
+    key = dg_key(name, order, stepper.integrator)
+    if name == "ader-dgmpm":
+        per_cell = scene.get("particles.per_cell", 1)
+        if scene.get("particles.file") or (len(per_cell) if isinstance(per_cell, list) else per_cell) != order + 1:
+            key = None
+    pair = None if nus is None or key is None else dg_limit(key, nus)
+    if pair is None:
+        return None
+    stable, unstable = pair
+    with_ = f" with {stepper.integrator}" if name == "rk-dgfem" else ""
+    return unstable, stable, (f"the 2D von Neumann limit {stable:.3f} of {name} P{order}{with_}, nu = "
+                              f"{', '.join(f'{nu:g}' for nu in dict.fromkeys(nus))} "
+                              f"(skdgmpm stability --dim 2 --method {name} --order {order})")
+
+
 def check_cfl(disc):
     """Refuse a CFL above the method's known stability limit (`skdgmpm.guards`): for DGMPM the
     von Neumann limit of its step, in 2D from the analysis of the 2D step (`skdgmpm.stability2d`:
     regular layouts, every material with a Poisson's ratio), else the 1D limit of the particle
-    layout (R18 §6; in 2D an upper bound); for MPM 1. With ``method.cfl_above_limit = true`` a
-    warning only. Returns the limit, or None where none is known (DGFEM, ADER, a particle file)."""
+    layout (R18 §6; in 2D an upper bound); for the 2D DG methods (ADER, RK-DGFEM) that of their
+    2D step; for MPM 1. With ``method.cfl_above_limit = true`` a warning only. Returns the limit,
+    or None where none is known (DGFEM and ADER in 1D, a DGMPM particle file)."""
     stepper, scene = disc.stepper, disc.scene
-    if scene.data["method"].get("name", "dgmpm") == "mpm":
+    name = scene.data["method"].get("name", "dgmpm")
+    if name == "mpm":
         limit, what = guards.mpm_limit(disc), "the MPM limit 1 (a wave or a particle crosses at most one cell a step)"
         refused = limit + 1e-6
     elif disc.layout is not None:
         coords = tuple(float(c) for c in np.unique(np.round(disc.layout[:, 0], 12)))
         refused, limit, what = _dgmpm_limit(disc, coords)
+    elif name != "dgmpm" and (dg := _dg_limit(disc)) is not None:
+        refused, limit, what = dg
     else:
         return None
     if stepper.cfl >= refused:

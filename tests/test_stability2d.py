@@ -111,6 +111,31 @@ def test_the_dg_methods_limits_predict_their_runs(method, cfl, unstable):
     _standing_wave_500_steps(keys, cfl, 3, unstable)
 
 
+@pytest.mark.parametrize("key, nu", [("ader 1", 0.3), ("rk-dgfem 1 rk2", 0.45)])
+def test_the_dg_rows_of_the_table_are_what_the_analysis_computes(key, nu):
+    table = json.loads(st.TABLE.read_text(encoding="utf-8"))
+    stored = table["dg"][key][table["nu"].index(nu)]
+    assert st.bracket(1, nu=nu, method=st.DG_ROWS[key]) == pytest.approx(stored, abs=1e-6)
+
+
+@pytest.mark.parametrize("order, per_cell", [(1, [0.25, 0.75]), (2, [0.25, 0.5, 0.75])])
+def test_ader_dgmpm_has_the_limits_of_ader_dgfem(order, per_cell):
+    """With P + 1 particles a direction (L23's S1, S2) the reconstruction interpolates the
+    particles and the step has ADER-DGFEM's nonzero eigenvalues: the run reads its limit from
+    ADER-DGFEM's row."""
+    pair = st.bracket(per_cell, nu=0.3, method={"name": "ader-dgmpm", "order": order})
+    assert pair == pytest.approx(st.dg_limit(f"ader {order}", [0.3]), abs=1e-6)
+
+
+def test_the_run_refuses_a_dg_cfl_above_the_2d_limit():
+    with pytest.raises(InputError, match=r"method.cfl = 0.7 exceeds the 2D von Neumann limit 0.620 of ader-dgfem P1, "
+                                         r"nu = 0.3 \(skdgmpm stability --dim 2 --method ader-dgfem --order 1\)"):
+        run("standing_wave_2d", ['method.name="ader-dgfem"', "method.order=1", "method.cfl=0.7"], progress=False)
+    with pytest.raises(InputError, match=r"exceeds the 2D von Neumann limit 0.651 of rk-dgfem P1 with rk2"):
+        run("standing_wave_2d", ['method.name="rk-dgfem"', "method.order=1", 'method.integrator="rk2"',
+                                 "method.cfl=0.66"], progress=False)
+
+
 def test_the_run_refuses_a_cfl_above_the_2d_limit():
     """The neo-Hookean plate under RK2 at its scene's CFL 1: the 1D limit (1) let it through and
     it inverted a cell at step 21; the 2D limit (0.748 at nu = 0.3) refuses it, naming both."""
