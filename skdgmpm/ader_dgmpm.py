@@ -50,6 +50,10 @@ class ADERDGMPM(ADERDGFEM):
         nel, nq = self.basis.dx.shape
         d = self.d
         self.n_max, self.slot = cell_slots(p.cell, nel)
+        if self.n_max > nq:                 # M below (L23 eq 59) sums nq rank-one terms: singular
+            raise InputError(f"particles.per_cell: {self.n_max} particles in a cell, more than the {nq} Gauss points "
+                             f"of ADER-DGMPM of order {self.order}, whose projection (L23 eq 59) would be singular: "
+                             f"at most {nq} a cell")
         xi = np.full((nel * self.n_max, d), 0.5)
         xi[self.slot] = p.xi
         self.mask = np.zeros(nel * self.n_max)

@@ -68,6 +68,14 @@ def test_a_scene_file_that_is_not_utf8(capsys, here):
     assert not (here / "out").exists()
 
 
+def test_ader_dgmpm_with_more_particles_than_gauss_points(capsys):
+    """Order 1 projects from 2 x 2 Gauss points: 3 x 3 particles made numpy's singular-matrix
+    traceback."""
+    one_line_error(capsys, ["run", "standing_wave_2d", "--set", 'method.name="ader-dgmpm"', "--set",
+                            "particles.per_cell=3", "--quiet"], "particles.per_cell", "9 particles in a cell",
+                   "at most 4")
+
+
 def test_a_mesh_node_at_nan(capsys, here):
     points = [list(p) for p in SQUARES]
     points[4][1] = np.nan
