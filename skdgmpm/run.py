@@ -55,37 +55,41 @@ def _dgmpm_limit(disc, coords):
 
 
 def _dg_limit(disc):
-    """(CFL refused from, the limit, what it is) of a 2D DG step (ADER-DGFEM, ADER-DGMPM,
-    RK-DGFEM) from `skdgmpm.stability2d`'s table, or None: 1D, a material without nu, an order or
+    """(CFL refused from, the limit, what it is) of a DG step (ADER-DGFEM, ADER-DGMPM, RK-DGFEM)
+    from `skdgmpm.stability2d`'s table, or None: in 2D a material without nu, an order or
     integrator the table lacks, ADER-DGMPM particles other than P + 1 a direction (with P + 1 its
     reconstruction interpolates them, and its step has ADER-DGFEM's limits), a particle file."""
-    from .stability2d import dg_key, dg_limit
+    from .stability2d import dg_key, dg_limit, dg_limit_1d
 
     stepper, scene = disc.stepper, disc.scene
     name, order = scene.data["method"].get("name", "dgmpm"), stepper.order
-    nus = _poisson_ratios(scene) if scene.dim == 2 else None
     key = dg_key(name, order, stepper.integrator)
     if name == "ader-dgmpm":
         per_cell = scene.get("particles.per_cell", 1)
         if scene.get("particles.file") or (len(per_cell) if isinstance(per_cell, list) else per_cell) != order + 1:
             key = None
-    pair = None if nus is None or key is None else dg_limit(key, nus)
+    if key is None:
+        return None
+    nus = _poisson_ratios(scene) if scene.dim == 2 else None
+    pair = dg_limit_1d(key) if scene.dim == 1 else None if nus is None else dg_limit(key, nus)
     if pair is None:
         return None
     stable, unstable = pair
-    with_ = f" with {stepper.integrator}" if name == "rk-dgfem" else ""
-    return unstable, stable, (f"the 2D von Neumann limit {stable:.3f} of {name} P{order}{with_}, nu = "
-                              f"{', '.join(f'{nu:g}' for nu in dict.fromkeys(nus))} "
-                              f"(skdgmpm stability --dim 2 --method {name} --order {order})")
+    what = f"the {scene.dim}D von Neumann limit {stable:.3f} of {name} P{order}"
+    what += f" with {stepper.integrator}" if name == "rk-dgfem" else ""
+    if scene.dim == 2:
+        what += (f", nu = {', '.join(f'{nu:g}' for nu in dict.fromkeys(nus))} "
+                 f"(skdgmpm stability --dim 2 --method {name} --order {order})")
+    return unstable, stable, what
 
 
 def check_cfl(disc):
     """Refuse a CFL above the method's known stability limit (`skdgmpm.guards`): for DGMPM the
     von Neumann limit of its step, in 2D from the analysis of the 2D step (`skdgmpm.stability2d`:
     regular layouts, every material with a Poisson's ratio), else the 1D limit of the particle
-    layout (R18 §6; in 2D an upper bound); for the 2D DG methods (ADER, RK-DGFEM) that of their
-    2D step; for MPM 1. With ``method.cfl_above_limit = true`` a warning only. Returns the limit,
-    or None where none is known (DGFEM and ADER in 1D, a DGMPM particle file)."""
+    layout (R18 §6; in 2D an upper bound); for the DG methods (ADER, RK-DGFEM) that of their
+    step, 1D or 2D; for MPM 1. With ``method.cfl_above_limit = true`` a warning only. Returns the
+    limit, or None where none is known (P = 3, RK2 with P >= 2, a particle file)."""
     stepper, scene = disc.stepper, disc.scene
     name = scene.data["method"].get("name", "dgmpm")
     if name == "mpm":

@@ -22,13 +22,14 @@ from __future__ import annotations
 
 import argparse
 import functools
+import itertools
 import json
 import warnings
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["bracket", "critical_cfl", "dg_key", "dg_limit", "dg_table", "dgmpm", "limit", "spectral_radius", "step_blocks",
+__all__ = ["bracket", "critical_cfl", "dg_key", "dg_limit", "dg_limit_1d", "dg_table", "dg_table_1d", "dgmpm", "limit", "spectral_radius", "step_blocks",
            "table"]
 
 #: The limits `skdgmpm run` checks a 2D DGMPM scene against (`table`, `limit`).
@@ -53,33 +54,38 @@ def _reach(method):
     return REACH["ader" if method["name"].startswith("ader") else method.get("integrator", "euler")]
 
 
-def _scene(method, per_cell, nu, cfl, n_cells):
+def _scene(method, per_cell, nu, cfl, n_cells, dim):
     from .scene import Scene
 
+    grid, sides = (({"size": [1.0, 1.0], "cells": [n_cells, n_cells]}, ("left", "right", "bottom", "top")) if dim == 2
+                   else ({"length": 1.0, "cells": n_cells}, ("left", "right")))
     data = {
-        "dim": 2,
-        "grid": {"size": [1.0, 1.0], "cells": [n_cells, n_cells]},
+        "dim": dim,
+        "grid": grid,
         "particles": {"per_cell": [float(x) for x in per_cell] if np.ndim(per_cell) else int(per_cell)},
         "material": {"law": "linear_elastic", "E": 1.0, "nu": float(nu), "rho": 1.0},
-        "bc": {side: {"kind": "symmetry"} for side in ("left", "right", "bottom", "top")},
+        "bc": {side: {"kind": "transmissive"} for side in sides},
         "method": {**method, "cfl": float(cfl), "cfl_above_limit": True, "cfl_guard": "largest"},
         "run": {"t_end": 1.0},
     }
     return Scene.from_dict(data, "stability2d")
 
 
-def step_blocks(per_cell=1, integrator="euler", transverse="ctu", cfl=1.0, nu=0.3, layout="auto", method=None):
+def step_blocks(per_cell=1, integrator="euler", transverse="ctu", cfl=1.0, nu=0.3, layout="auto", method=None,
+                dim=2):
     """The blocks ``R_r`` of one step's Bloch symbol: first-order DGMPM with ``integrator``,
     ``transverse`` and ``layout``, or the method of the [method] table ``method`` (ADER-DGMPM,
-    ADER-DGFEM, RK-DGFEM: its points are the particles or the Gauss points).
+    ADER-DGFEM, RK-DGFEM: its points are the particles or the Gauss points); in 2D, or in 1D
+    with ``dim = 1`` (the bar: one wave speed, nu has no part).
 
     Returns
     -------
     dict
-        ``{(rx, ry): ndarray (6 npc, 6 npc)}`` for offsets up to the step's reach: row ``6 a + i``
-        is component ``i`` of point ``a`` of the cell at that offset after the step, column
-        ``6 b + k`` component ``k`` of point ``b`` of the centre cell before it; the points of a
-        cell in the order of their (y, x) position in it.
+        ``{r: ndarray (nc npc, nc npc)}`` for offsets ``r`` (``(rx, ry)``, in 1D ``(rx,)``) up
+        to the step's reach, ``nc`` = 6 (2D) or 2 (1D) components: row ``nc a + i`` is component
+        ``i`` of point ``a`` of the cell at that offset after the step, column ``nc b + k``
+        component ``k`` of point ``b`` of the centre cell before it; the points of a cell in
+        the order of their (y, x) position in it.
     """
     from .build import build
 
@@ -88,62 +94,66 @@ def step_blocks(per_cell=1, integrator="euler", transverse="ctu", cfl=1.0, nu=0.
     n_cells = 2 * reach + 5
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")           # the CFL may lie above the 1D limit: that is the point
-        disc = build(_scene(method, per_cell, nu, cfl, n_cells))
+        disc = build(_scene(method, per_cell, nu, cfl, n_cells, dim))
     stepper = disc.stepper
-    points_, X = stepper.particles, stepper.particles.X
+    points_, X = stepper.particles, stepper.particles.X.reshape(len(stepper.particles.X), dim)
     h = 1.0 / n_cells
     cell = np.floor(X / h).astype(int)
     local = np.round(X / h - cell, 9)      # rounded: the points of a cell sort alike in every cell
     c = n_cells // 2
+    nc = dim * dim + dim
 
-    def points(ix, iy):
-        idx = np.flatnonzero((cell[:, 0] == ix) & (cell[:, 1] == iy))
-        return idx[np.lexsort((local[idx, 0], local[idx, 1]))]
+    def points(r):
+        idx = np.flatnonzero(np.all(cell == c + np.asarray(r), axis=1))
+        return idx[np.lexsort(local[idx].T)]
 
-    F0, v0 = np.tile(np.eye(2), (len(X), 1, 1)), np.zeros((len(X), 2))
+    F0, v0 = np.tile(np.eye(dim), (len(X), 1, 1)), np.zeros((len(X), dim))
     base = stepper.step(stepper.initial_state(F0, v0))
-    centre = points(c, c)
+    centre = points((0,) * dim)
     npc = len(centre)
     ring = reach + 1
-    offsets = [(rx, ry) for rx in range(-ring, ring + 1) for ry in range(-ring, ring + 1)]
-    rows = {r: points(c + r[0], c + r[1]) for r in offsets}
-    blocks = {r: np.zeros((6 * npc, 6 * npc)) for r in offsets}
+    offsets = list(itertools.product(range(-ring, ring + 1), repeat=dim))
+    rows = {r: points(r) for r in offsets}
+    blocks = {r: np.zeros((nc * npc, nc * npc)) for r in offsets}
     for b, p in enumerate(centre):
-        for k in range(6):
+        for k in range(nc):
             F, v = F0.copy(), v0.copy()
-            if k < 4:
-                F[p, k // 2, k % 2] += _EPS
+            if k < dim * dim:
+                F[p, k // dim, k % dim] += _EPS
             else:
-                v[p, k - 4] += _EPS / points_.rho0[p]
+                v[p, k - dim * dim] += _EPS / points_.rho0[p]
             new = stepper.step(stepper.initial_state(F, v))
             if new.t != base.t:
                 raise RuntimeError(f"the step's time step changed with the state ({new.t} != {base.t})")
             for r, idx in rows.items():
-                blocks[r][:, 6 * b + k] = ((new.U[idx] - base.U[idx]) / _EPS).ravel()
-    beyond = max(np.abs(B).max() for r, B in blocks.items() if max(abs(r[0]), abs(r[1])) == ring)
+                blocks[r][:, nc * b + k] = ((new.U[idx] - base.U[idx]) / _EPS).ravel()
+    beyond = max(np.abs(B).max() for r, B in blocks.items() if max(map(abs, r)) == ring)
     if beyond > 1e-12:
         raise RuntimeError(f"{method['name']}'s step reaches beyond offset {reach} ({beyond:.3g}): REACH is wrong")
-    return {r: B for r, B in blocks.items() if max(abs(r[0]), abs(r[1])) < ring}
+    return {r: B for r, B in blocks.items() if max(map(abs, r)) < ring}
 
 
-def spectral_radius(blocks, n_theta=32, theta=None):
+def spectral_radius(blocks, n_theta=None, theta=None):
     """Largest ``|eigenvalue|`` of ``G(theta)`` over an ``n_theta x n_theta`` grid of wave
-    numbers, or over the wave numbers ``theta`` (k, 2) given."""
+    numbers (default 32; in 1D ``n_theta``, default 256), or over the wave numbers ``theta``
+    (k, dim) given."""
+    dim = len(next(iter(blocks)))
+    n_theta = n_theta or (256 if dim == 1 else 32)
     if theta is None:
         grid = np.linspace(-np.pi, np.pi, n_theta, endpoint=False)
-        theta = np.stack([g.ravel() for g in np.meshgrid(grid, grid, indexing="ij")], axis=1)
-    theta = np.asarray(theta, dtype=float).reshape(-1, 2)
+        theta = np.stack([g.ravel() for g in np.meshgrid(*[grid] * dim, indexing="ij")], axis=1)
+    theta = np.asarray(theta, dtype=float).reshape(-1, dim)
     G = sum(B[None] * np.exp(-1j * (theta @ np.asarray(r, dtype=float)))[:, None, None] for r, B in blocks.items())
     return float(np.abs(np.linalg.eigvals(G)).max())
 
 
 def bracket(per_cell=1, integrator="euler", transverse="ctu", nu=0.3, layout="auto", lo=0.2, hi=1.4, tol=2e-3,
-            n_theta=32, method=None):
+            n_theta=None, method=None, dim=2):
     """(lo, hi): the step is stable at CFL ``lo`` and unstable at ``hi`` (``hi - lo <= tol``),
     by bisection; stable means a spectral radius of at most 1 + 1e-9 (the blocks are exact to
     rounding: 1 + 3e-13 where the limit is reached exactly). (0, tol) where nothing is stable."""
     def stable(cfl):
-        blocks = step_blocks(per_cell, integrator, transverse, cfl, nu, layout, method)
+        blocks = step_blocks(per_cell, integrator, transverse, cfl, nu, layout, method, dim)
         return spectral_radius(blocks, n_theta) <= 1 + 1e-9
 
     if not stable(lo):                  # below the first guess: bisect from 0 (not a CFL it steps)
@@ -195,6 +205,15 @@ def dg_table(rows=tuple(DG_ROWS), nus=NUS, progress=print):
     return limits
 
 
+def dg_table_1d(rows=tuple(DG_ROWS), progress=print):
+    """{row: [lo, hi]} of the DG methods' 1D steps (one wave speed: no nu)."""
+    limits = {}
+    for key in rows:
+        limits[key] = [round(x, 6) for x in bracket(1, nu=0.0, hi=2.0, method=DG_ROWS[key], dim=1)]
+        progress(f"{key}, 1D: {limits[key][0]:.3f}")
+    return limits
+
+
 def table(per_cells=PER_CELL, nus=NUS, progress=print):
     """{"nu": nus, "limits": {"n integrator transverse": [[lo, hi] per nu]}} for every regular
     layout, integrator and transverse correction."""
@@ -229,6 +248,12 @@ def dg_limit(key, nus):
     return _lowest(_table()["dg"].get(key), nus)
 
 
+def dg_limit_1d(key):
+    """(stable, unstable) CFL of the 1D step of the DG method of row ``key``, or None."""
+    pair = _table()["dg_1d"].get(key)
+    return None if pair is None else tuple(pair)
+
+
 def _lowest(rows, nus):
     grid = np.asarray(_table()["nu"])
     if rows is None or not nus or any(not grid[0] <= nu <= grid[-1] for nu in nus):
@@ -242,16 +267,21 @@ def _lowest(rows, nus):
 
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="python -m skdgmpm.stability2d",
-                                     description="Write the CFL limits of 2D DGMPM that skdgmpm run checks.")
+                                     description="Write the CFL limits that skdgmpm run checks.")
     parser.add_argument("--out", type=Path, default=TABLE, help=f"JSON file (default {TABLE})")
-    parser.add_argument("--only", choices=("dgmpm", "dg"), help="recompute one part, keep the other's from --out")
+    parser.add_argument("--only", choices=PARTS, help="recompute one part, keep the others from --out")
     args = parser.parse_args(argv)
-    kept = json.loads(args.out.read_text(encoding="utf-8")) if args.only else {}
-    data = table() if args.only != "dg" else {k: v for k, v in kept.items() if k != "dg"}
-    data["dg"] = dg_table() if args.only != "dgmpm" else kept["dg"]
+    data = json.loads(args.out.read_text(encoding="utf-8")) if args.only else {}
+    for part, compute in PARTS.items():
+        if args.only in (None, part):
+            data.update(compute())
     args.out.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
     print(f"wrote {args.out}")
     return 0
+
+
+#: The table's parts and what computes each (`main`).
+PARTS = {"dgmpm": lambda: table(), "dg": lambda: {"dg": dg_table()}, "dg_1d": lambda: {"dg_1d": dg_table_1d()}}
 
 
 if __name__ == "__main__":

@@ -136,6 +136,38 @@ def test_the_run_refuses_a_dg_cfl_above_the_2d_limit():
                                  "method.cfl=0.66"], progress=False)
 
 
+@pytest.mark.parametrize("method, reference", [
+    ({"name": "rk-dgfem", "order": 1, "integrator": "rk2"}, 3 * 0.333),
+    ({"name": "rk-dgfem", "order": 1, "integrator": "rk4"}, 3 * 0.464),
+    ({"name": "rk-dgfem", "order": 2, "integrator": "rk4"}, 5 * 0.235),
+])
+def test_the_1d_reading_gives_cockburn_and_shus_limits(method, reference):
+    """Independent reference: Cockburn & Shu (J. Sci. Comput. 16, 2001, Table 2.2), the L2 CFL
+    limits of RK-DG with upwind fluxes for linear advection, to three digits: P1 with RK2 1/3,
+    with RK4 0.464, P2 with RK4 0.235, in c dt / h; our CFL is (2P + 1) times that. The bar's two
+    waves are two such advections."""
+    lo, hi = st.bracket(1, nu=0.0, hi=2.0, method=method, dim=1)
+    assert lo - 0.005 * (2 * method["order"] + 1) <= reference <= hi + 0.005 * (2 * method["order"] + 1)
+
+
+@pytest.mark.parametrize("per_cell, integrator", [(2, "euler"), (3, "euler"), (2, "rk2")])
+def test_the_1d_reading_of_dgmpm_gives_the_1d_analysis(per_cell, integrator):
+    """The engine's 1D DGMPM step against `skdgmpm.stability` (R18's matrices, scalar advection):
+    the bracket holds its spectral limit."""
+    lo, hi = st.bracket(per_cell, integrator, "ctu", nu=0.0, hi=2.0, dim=1)
+    limit = st1.critical_cfl(list((np.arange(per_cell) + 0.5) / per_cell), integrator, criterion="spectral")
+    assert lo - 1e-3 <= limit <= hi + 1e-3
+
+
+def test_the_run_refuses_a_dg_cfl_above_the_1d_limit():
+    """ADER-DGFEM P2 on the bar: 1D limit 0.854 (the table's dg_1d; Dumbser's ADER-DG O3 0.17 x 5)."""
+    with pytest.raises(InputError, match=r"method.cfl = 0.9 exceeds the 1D von Neumann limit 0.854 of ader-dgfem P2"):
+        run("bar_elastic_1d", ['method.name="ader-dgfem"', "method.order=2", "method.cfl=0.9"], progress=False)
+    table = json.loads(st.TABLE.read_text(encoding="utf-8"))
+    assert st.bracket(1, nu=0.0, hi=2.0, method=st.DG_ROWS["ader 2"], dim=1) == pytest.approx(table["dg_1d"]["ader 2"],
+                                                                                                abs=1e-6)
+
+
 def test_the_run_refuses_a_cfl_above_the_2d_limit():
     """The neo-Hookean plate under RK2 at its scene's CFL 1: the 1D limit (1) let it through and
     it inverted a cell at step 21; the 2D limit (0.748 at nu = 0.3) refuses it, naming both."""
