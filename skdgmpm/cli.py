@@ -104,7 +104,7 @@ def _cmd_scenes(args):
 def _cmd_stability(args):
     from .stability import analyse, parse_layout
 
-    if args.dim == 2:
+    if args.dim == 2 or args.method != "dgmpm":
         return _stability_2d(args)
     if args.layout is None:
         raise InputError("skdgmpm stability: --layout is required in 1D (e.g. --layout 0.25,0.75)")
@@ -124,9 +124,9 @@ def _stability_2d(args):
     if not -1.0 < args.nu < 0.5:
         raise InputError(f"skdgmpm stability: --nu {args.nu} must lie in (-1, 0.5)")
     n = args.per_cell
-    print(f"{args.method}; {n} x {n} points a cell at (k + 1/2) / {n} (DGMPM, ADER-DGMPM: particles); "
-          f"nu = {args.nu:g}; 2D linear elasticity (the engine's own step, skdgmpm.stability2d; compiles "
-          f"the linear law's step on first use)")
+    where = f"{n} x {n} points a cell at (k + 1/2) / {n}; nu = {args.nu:g}" if args.dim == 2 else f"{n} points a cell"
+    print(f"{args.method}; {where} (DGMPM, ADER-DGMPM: particles); {args.dim}D linear elasticity (the engine's own "
+          f"step, skdgmpm.stability2d; compiles the linear law's step on first use)")
     if args.method == "dgmpm":
         print(f"{'method':<8}{'ctu':>8}{'dcu':>8}")
         report = {}
@@ -138,7 +138,8 @@ def _stability_2d(args):
         method = {"name": args.method, "order": args.order}
         if args.method == "rk-dgfem":
             method["integrator"] = args.integrator or ("rk2" if args.order == 1 else "rk4")
-        report = {"order": args.order, **method, "cfl": stability2d.critical_cfl(n, nu=args.nu, method=method)}
+        lo, _ = stability2d.bracket(n, nu=args.nu if args.dim == 2 else 0.0, hi=2.0, method=method, dim=args.dim)
+        report = {"order": args.order, **method, "cfl": lo}
         print(f"order {args.order}{', ' + method['integrator'] if 'integrator' in method else ''}: "
               f"CFL limit {report['cfl']:.3f} (the method's CFL: dt = CFL h / ((2P + 1) c) for P >= 1)")
     print("CFL limit: the largest CFL at which no Fourier mode of the step grows (to 0.002, below);")
@@ -405,11 +406,13 @@ def main(argv=None):
 
     p = sub.add_parser("stability", help="von Neumann analysis of a particle layout: 1D (R18 §6) or the 2D step")
     p.add_argument("--layout", help="1D: parent coordinates in a cell, e.g. 0.25,0.75")
-    p.add_argument("--dim", type=int, choices=(1, 2), default=1, help="2: the 2D step's limits (default 1)")
+    p.add_argument("--dim", type=int, choices=(1, 2), default=1,
+                   help="2: the 2D step's limits (default 1: R18's analysis for dgmpm, the 1D step otherwise)")
     p.add_argument("--per-cell", type=int, default=1, help="2D: particles a direction in a cell (default 1)")
     p.add_argument("--nu", type=float, default=0.3, help="2D: Poisson's ratio (default 0.3)")
     p.add_argument("--method", default="dgmpm", choices=("dgmpm", "ader-dgmpm", "ader-dgfem", "rk-dgfem"),
-                   help="2D: the method whose step is analysed (default dgmpm: Euler / RK2 x CTU / DCU)")
+                   help="the method whose step is analysed (default dgmpm: Euler / RK2 x CTU / DCU in 2D); "
+                        "other than dgmpm, in 1D too")
     p.add_argument("--order", type=int, default=1, help="2D: order P of ADER and RK-DGFEM (default 1)")
     p.add_argument("--integrator", choices=("rk2", "rk4"), help="2D: RK-DGFEM's (default rk2 for P = 1, else rk4)")
     p.add_argument("--json", action="store_true", help="also print the report as JSON")

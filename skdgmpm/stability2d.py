@@ -1,4 +1,4 @@
-"""Linear stability of the 2D DGMPM step, read off the engine's own step.
+"""Linear stability of a method's 2D (or 1D) step, read off the engine's own step.
 
 R18 gives a von Neumann analysis in 1D only (§6; `skdgmpm.stability`) and set the 2D CFL of
 DCU to 0.7 "by testing" (§7.3). Here the analysis is the step itself: on a uniform grid of
@@ -12,7 +12,9 @@ two-stage step with those at offset two). The step is stable when the spectral r
 ``G(theta)`` is at most 1 for every ``theta``; the CFL limit is found by bisection.
 
 Units are free (the limit depends on the layout, the integrator, the transverse corrections
-and Poisson's ratio only: the CFL counts cells crossed by the P wave). `skdgmpm run` reads the
+and Poisson's ratio only: the CFL counts cells crossed by the P wave). The same reading serves
+ADER-DGMPM, ADER-DGFEM and RK-DGFEM, and 1D steps (``dim = 1``: checked against Cockburn and
+Shu's RK-DG limits and `skdgmpm.stability`). `skdgmpm run` reads the
 limits of the regular layouts from ``stability_2d.json`` (`limit`), written by
 ``python -m skdgmpm.stability2d`` (a few minutes): the analysis itself compiles the linear law's
 step, which a run of another law should not wait for.

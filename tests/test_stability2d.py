@@ -192,5 +192,8 @@ def test_the_command_prints_the_2d_limits(capsys):
     assert main(["stability", "--dim", "2", "--method", "ader-dgfem", "--json"]) == 0
     out = capsys.readouterr().out
     assert json.loads(out.strip().splitlines()[-1])["limits"]["cfl"] == pytest.approx(0.620, abs=3e-3)
+    assert main(["stability", "--method", "rk-dgfem", "--integrator", "rk4", "--json"]) == 0    # 1D
+    out = capsys.readouterr().out
+    assert json.loads(out.strip().splitlines()[-1])["limits"]["cfl"] == pytest.approx(1.392, abs=3e-3)
     assert main(["stability"]) == 2
     assert "error: skdgmpm stability: --layout is required in 1D" in capsys.readouterr().err
