@@ -131,17 +131,17 @@ def _stability_2d(args):
         print(f"{'method':<8}{'ctu':>8}{'dcu':>8}")
         report = {}
         for integrator in ("euler", "rk2"):
-            row = [stability2d.critical_cfl(n, integrator, t, args.nu) for t in ("ctu", "dcu")]
-            report[integrator] = dict(zip(("ctu", "dcu"), row))
-            print(f"{integrator:<8}" + "".join(f"{x:>8.3f}" for x in row))
+            row = [stability2d.bracket(n, integrator, t, args.nu) for t in ("ctu", "dcu")]
+            report[integrator] = dict(zip(("ctu", "dcu"), (lo for lo, _ in row)))
+            print(f"{integrator:<8}" + "".join(f"{stability2d.shown(pair):>8}" for pair in row))
     else:
         method = {"name": args.method, "order": args.order}
         if args.method == "rk-dgfem":
             method["integrator"] = args.integrator or ("rk2" if args.order == 1 else "rk4")
-        lo, _ = stability2d.bracket(n, nu=args.nu if args.dim == 2 else 0.0, hi=2.0, method=method, dim=args.dim)
-        report = {"order": args.order, **method, "cfl": lo}
+        pair = stability2d.bracket(n, nu=args.nu if args.dim == 2 else 0.0, hi=2.0, method=method, dim=args.dim)
+        report = {"order": args.order, **method, "cfl": pair[0]}
         print(f"order {args.order}{', ' + method['integrator'] if 'integrator' in method else ''}: "
-              f"CFL limit {report['cfl']:.3f} (the method's CFL: dt = CFL h / ((2P + 1) c) for P >= 1)")
+              f"CFL limit {stability2d.shown(pair)} (the method's CFL: dt = CFL h / ((2P + 1) c) for P >= 1)")
     print("CFL limit: the largest CFL at which no Fourier mode of the step grows (to 0.002, below);")
     print("  skdgmpm run refuses a 2D CFL above it (method.cfl_above_limit = true runs it anyway).")
     if args.json:

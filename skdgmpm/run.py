@@ -41,14 +41,18 @@ def _dgmpm_limit(disc, coords):
     n = len(coords)
     nus = _poisson_ratios(scene) if scene.dim == 2 else None
     if nus is not None and np.allclose(coords, (np.arange(n) + 0.5) / n, rtol=0, atol=1e-9):
-        from .stability2d import limit as limit_2d
+        from .stability2d import limit as limit_2d, shown
         pair = limit_2d(n, stepper.integrator, stepper.transverse, nus)
         if pair is not None:
             stable, unstable = pair
+            other = "dcu" if stepper.transverse == "ctu" else "ctu"
+            alternative = limit_2d(n, stepper.integrator, other, nus)
+            hint = (f"; with method.transverse = \"{other}\" it is {shown(alternative)}"
+                    if alternative is not None and alternative[1] > stepper.cfl >= unstable else "")
             return unstable, stable, (
-                f"the 2D von Neumann limit {stable:.3f} of {stepper.integrator} with {stepper.transverse}, "
+                f"the 2D von Neumann limit {shown(pair)} of {stepper.integrator} with {stepper.transverse}, "
                 f"{n} x {n} particles a cell, nu = {', '.join(f'{nu:g}' for nu in dict.fromkeys(nus))} "
-                f"(skdgmpm stability --dim 2 --per-cell {n})")
+                f"(skdgmpm stability --dim 2 --per-cell {n}){hint}")
     limit = _critical_cfl(coords, stepper.integrator)
     return limit + 1e-6, limit, (f"the von Neumann limit {limit:.2f} of layout {list(coords)} with {stepper.integrator} "
                                  f"(skdgmpm stability --layout ...)")
@@ -59,7 +63,7 @@ def _dg_limit(disc):
     from `skdgmpm.stability2d`'s table, or None: in 2D a material without nu, an order or
     integrator the table lacks, ADER-DGMPM particles other than P + 1 a direction (with P + 1 its
     reconstruction interpolates them, and its step has ADER-DGFEM's limits), a particle file."""
-    from .stability2d import dg_key, dg_limit, dg_limit_1d
+    from .stability2d import dg_key, dg_limit, dg_limit_1d, shown
 
     stepper, scene = disc.stepper, disc.scene
     name, order = scene.data["method"].get("name", "dgmpm"), stepper.order
@@ -75,7 +79,7 @@ def _dg_limit(disc):
     if pair is None:
         return None
     stable, unstable = pair
-    what = f"the {scene.dim}D von Neumann limit {stable:.3f} of {name} P{order}"
+    what = f"the {scene.dim}D von Neumann limit {shown(pair)} of {name} P{order}"
     what += f" with {stepper.integrator}" if name == "rk-dgfem" else ""
     if scene.dim == 2:
         what += (f", nu = {', '.join(f'{nu:g}' for nu in dict.fromkeys(nus))} "

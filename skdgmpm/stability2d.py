@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["bracket", "critical_cfl", "dg_key", "dg_limit", "dg_limit_1d", "dg_table", "dg_table_1d", "dgmpm", "limit", "spectral_radius", "step_blocks",
-           "table"]
+           "shown", "table"]
 
 #: The limits `skdgmpm run` checks a 2D DGMPM scene against (`table`, `limit`).
 TABLE = Path(__file__).with_name("stability_2d.json")
@@ -190,6 +190,13 @@ def _key(per_cell, integrator, transverse):
 DG_ROWS = {**{f"ader {p}": {"name": "ader-dgfem", "order": p} for p in (1, 2)},
            "rk-dgfem 1 rk2": {"name": "rk-dgfem", "order": 1, "integrator": "rk2"},
            **{f"rk-dgfem {p} rk4": {"name": "rk-dgfem", "order": p, "integrator": "rk4"} for p in (1, 2)}}
+
+
+def shown(pair):
+    """A bracket (stable, unstable) as text: 1.0 where it holds 1 (CTU's and RK2 with DCU's limit,
+    reached exactly), else its stable end to three decimals."""
+    stable, unstable = pair
+    return "1.0" if stable <= 1.0 <= unstable else f"{stable:.3f}"
 
 
 def dg_key(name, order, integrator=None):

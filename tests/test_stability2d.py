@@ -176,6 +176,16 @@ def test_the_run_refuses_a_cfl_above_the_2d_limit():
         run("plate_impact_neohookean_2d", ['method.integrator="rk2"'], progress=False)
 
 
+def test_the_refusal_names_the_transverse_correction_that_runs_the_cfl():
+    """A 2D scene that sets nothing of the method (DGMPM, Euler, DCU, CFL 1) is refused; the
+    message says that CTU's limit is 1 (and RK2's refusal at CFL 1 that DCU's is)."""
+    with pytest.raises(InputError, match=r"limit 0.651 of euler with dcu, .*; with method.transverse = \"ctu\" "
+                                         r"it is 1.0:"):
+        run("standing_wave_2d", ["particles.per_cell=1", "method.cfl=1.0"], progress=False)
+    with pytest.raises(InputError, match=r"limit 0.748 of rk2 with ctu, .*; with method.transverse = \"dcu\" it is"):
+        run("plate_impact_neohookean_2d", ['method.integrator="rk2"'], progress=False)
+
+
 def test_a_layout_the_table_lacks_falls_back_to_the_1d_limit():
     """Shifted particles (not at (k + 1/2) / n): the 1D limit of the layout, per direction."""
     with pytest.raises(InputError, match=r"exceeds the von Neumann limit .* of layout \[0.3, 0.7\]"):
