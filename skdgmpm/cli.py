@@ -105,7 +105,7 @@ def _cmd_stability(args):
     from .stability import analyse, parse_layout
 
     if args.dim == 2 or args.method != "dgmpm":
-        return _stability_2d(args)
+        return _stability_of_steps(args)
     if args.layout is None:
         raise InputError("skdgmpm stability: --layout is required in 1D (e.g. --layout 0.25,0.75)")
     layout = parse_layout(args.layout)
@@ -116,7 +116,7 @@ def _cmd_stability(args):
     return 0
 
 
-def _stability_2d(args):
+def _stability_of_steps(args):
     from . import stability2d
 
     if args.per_cell < 1:
@@ -143,7 +143,7 @@ def _stability_2d(args):
         print(f"order {args.order}{', ' + method['integrator'] if 'integrator' in method else ''}: "
               f"CFL limit {stability2d.shown(pair)} (the method's CFL: dt = CFL h / ((2P + 1) c) for P >= 1)")
     print("CFL limit: the largest CFL at which no Fourier mode of the step grows (to 0.002, below);")
-    print("  skdgmpm run refuses a 2D CFL above it (method.cfl_above_limit = true runs it anyway).")
+    print("  skdgmpm run refuses a CFL above it (method.cfl_above_limit = true runs it anyway).")
     if args.json:
         print(json.dumps({"method": args.method, "per_cell": n, "nu": args.nu, "limits": report}))
     return 0
@@ -413,8 +413,8 @@ def main(argv=None):
     p.add_argument("--method", default="dgmpm", choices=("dgmpm", "ader-dgmpm", "ader-dgfem", "rk-dgfem"),
                    help="the method whose step is analysed (default dgmpm: Euler / RK2 x CTU / DCU in 2D); "
                         "other than dgmpm, in 1D too")
-    p.add_argument("--order", type=int, default=1, help="2D: order P of ADER and RK-DGFEM (default 1)")
-    p.add_argument("--integrator", choices=("rk2", "rk4"), help="2D: RK-DGFEM's (default rk2 for P = 1, else rk4)")
+    p.add_argument("--order", type=int, default=1, help="order P of ADER and RK-DGFEM (default 1)")
+    p.add_argument("--integrator", choices=("rk2", "rk4"), help="RK-DGFEM's (default rk2 for P = 1, else rk4)")
     p.add_argument("--json", action="store_true", help="also print the report as JSON")
     p.set_defaults(func=_cmd_stability)
 

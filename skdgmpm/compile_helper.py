@@ -84,11 +84,11 @@ def nodal(scene):
     than euler, or `method.layout = "nodes"`."""
     if scene.get("method.name", "dgmpm") != "dgmpm":
         return False
-    return (_per_axis(scene) != 1 or scene.get("particles.file") is not None
+    return (per_axis(scene) != 1 or scene.get("particles.file") is not None
             or scene.get("method.integrator", "euler") != "euler" or scene.get("method.layout", "auto") == "nodes")
 
 
-def _per_axis(scene):
+def per_axis(scene):
     """Particles per cell and direction as `particles.per_cell` gives them (a count, or a list of
     positions), unchecked: the build says what is wrong."""
     per_cell = scene.get("particles.per_cell", 1)
@@ -106,7 +106,7 @@ def _small(scene, helpers=1):
         if files:
             return all(os.path.getsize(scene.resolve(f)) * scale * helpers <= MAX_MESH_BYTES for f in files)
         # a DG scene: its cells' bytes (ADER-DGMPM's particles are fewer), else its particles'
-        points = 1 if dg else int(_per_axis(scene)) ** d
+        points = 1 if dg else int(per_axis(scene)) ** d
         return float(np.prod(np.asarray(scene.get("grid.cells"), dtype=float))) * points * scale * helpers <= MAX_POINTS
     except (OSError, TypeError, ValueError):    # the build says what is wrong
         return False

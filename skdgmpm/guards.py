@@ -25,8 +25,8 @@ guards stop it earlier (exit 3, like the other health stops), or refuse it befor
 - **CFL above a known stability limit** (`stability_limit`): refused (exit 2) unless the scene sets
   ``method.cfl_above_limit = true``. Known limits: first-order DGMPM, the von Neumann limit of
   its step (in 2D `skdgmpm.stability2d`'s table for regular layouts, else the layout's 1D limit,
-  R18 §6, `skdgmpm.stability`); ADER and RK-DGFEM in 2D, that of their 2D step (the same
-  table); MPM, 1 (dt = h / (c + |v|)). The DGFEM and ADER steps are already scaled by
+  R18 §6, `skdgmpm.stability`); ADER and RK-DGFEM P = 1, 2, that of their 1D or 2D step (the
+  same table); MPM, 1 (dt = h / (c + |v|)). The DGFEM and ADER steps are already scaled by
   1 / (2P + 1), and the scene admits CFL <= 2 for them.
 """
 import numpy as np

@@ -33,6 +33,10 @@ def _poisson_ratios(scene):
     return None if any(isinstance(nu, bool) or not isinstance(nu, (int, float)) for nu in nus) else nus
 
 
+def _nus_text(nus):
+    return ", ".join(f"{nu:g}" for nu in dict.fromkeys(nus))
+
+
 def _dgmpm_limit(disc, coords):
     """(CFL refused from, the limit, what it is) of a DGMPM layout: in 2D the von Neumann limit
     of the 2D step from `skdgmpm.stability2d`'s table (regular layouts, materials that give nu),
@@ -51,7 +55,7 @@ def _dgmpm_limit(disc, coords):
                     if alternative is not None and alternative[1] > stepper.cfl >= unstable else "")
             return unstable, stable, (
                 f"the 2D von Neumann limit {shown(pair)} of {stepper.integrator} with {stepper.transverse}, "
-                f"{n} x {n} particles a cell, nu = {', '.join(f'{nu:g}' for nu in dict.fromkeys(nus))} "
+                f"{n} x {n} particles a cell, nu = {_nus_text(nus)} "
                 f"(skdgmpm stability --dim 2 --per-cell {n}){hint}")
     limit = _critical_cfl(coords, stepper.integrator)
     return limit + 1e-6, limit, (f"the von Neumann limit {limit:.2f} of layout {list(coords)} with {stepper.integrator} "
@@ -68,10 +72,8 @@ def _dg_limit(disc):
     stepper, scene = disc.stepper, disc.scene
     name, order = scene.data["method"].get("name", "dgmpm"), stepper.order
     key = dg_key(name, order, stepper.integrator)
-    if name == "ader-dgmpm":
-        per_cell = scene.get("particles.per_cell", 1)
-        if scene.get("particles.file") or (len(per_cell) if isinstance(per_cell, list) else per_cell) != order + 1:
-            key = None
+    if name == "ader-dgmpm" and (scene.get("particles.file") or compile_helper.per_axis(scene) != order + 1):
+        key = None
     if key is None:
         return None
     nus = _poisson_ratios(scene) if scene.dim == 2 else None
@@ -82,7 +84,7 @@ def _dg_limit(disc):
     what = f"the {scene.dim}D von Neumann limit {shown(pair)} of {name} P{order}"
     what += f" with {stepper.integrator}" if name == "rk-dgfem" else ""
     if scene.dim == 2:
-        what += (f", nu = {', '.join(f'{nu:g}' for nu in dict.fromkeys(nus))} "
+        what += (f", nu = {_nus_text(nus)} "
                  f"(skdgmpm stability --dim 2 --method {name} --order {order})")
     return unstable, stable, what
 

@@ -31,8 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["bracket", "critical_cfl", "dg_key", "dg_limit", "dg_limit_1d", "dg_table", "dg_table_1d", "dgmpm", "limit", "spectral_radius", "step_blocks",
-           "shown", "table"]
+__all__ = ["bracket", "dg_key", "dg_limit", "dg_limit_1d", "dg_table", "dg_table_1d", "dgmpm", "limit", "shown",
+           "spectral_radius", "step_blocks", "table"]
 
 #: The limits `skdgmpm run` checks a 2D DGMPM scene against (`table`, `limit`).
 TABLE = Path(__file__).with_name("stability_2d.json")
@@ -166,18 +166,6 @@ def bracket(per_cell=1, integrator="euler", transverse="ctu", nu=0.3, layout="au
     return lo, hi
 
 
-def critical_cfl(per_cell=1, integrator="euler", transverse="ctu", nu=0.3, layout="auto", tol=2e-3, method=None):
-    """Largest CFL found stable (within ``tol`` of the limit, below it)."""
-    frozen = None if method is None else tuple(sorted(method.items()))
-    per_cell = tuple(per_cell) if np.ndim(per_cell) else per_cell
-    return _critical_cfl(per_cell, integrator, transverse, nu, layout, tol, frozen)
-
-
-@functools.lru_cache(maxsize=64)
-def _critical_cfl(per_cell, integrator, transverse, nu, layout, tol, method):
-    return bracket(per_cell, integrator, transverse, nu, layout, tol=tol, method=method and dict(method))[0]
-
-
 def _key(per_cell, integrator, transverse):
     return f"{per_cell} {integrator} {transverse}"
 
@@ -205,34 +193,28 @@ def dg_key(name, order, integrator=None):
     return key if key in DG_ROWS else None
 
 
+def _row(key, nus, progress, *args, **keys):
+    """[[lo, hi] per nu] of `bracket` (its arguments ``args``, ``keys``), rounded; said as it ends."""
+    pairs = [[round(x, 6) for x in bracket(*args, nu=nu, **keys)] for nu in nus]
+    progress(f"{key}: " + " ".join(f"{lo:.3f}" for lo, _ in pairs))
+    return pairs
+
+
 def dg_table(rows=tuple(DG_ROWS), nus=NUS, progress=print):
     """{row: [[lo, hi] per nu]} of the DG methods (`DG_ROWS`)."""
-    limits = {}
-    for key in rows:
-        limits[key] = [[round(x, 6) for x in bracket(1, nu=nu, method=DG_ROWS[key])] for nu in nus]
-        progress(f"{key}: " + " ".join(f"{lo:.3f}" for lo, _ in limits[key]))
-    return limits
+    return {key: _row(key, nus, progress, 1, method=DG_ROWS[key]) for key in rows}
 
 
 def dg_table_1d(rows=tuple(DG_ROWS), progress=print):
     """{row: [lo, hi]} of the DG methods' 1D steps (one wave speed: no nu)."""
-    limits = {}
-    for key in rows:
-        limits[key] = [round(x, 6) for x in bracket(1, nu=0.0, hi=2.0, method=DG_ROWS[key], dim=1)]
-        progress(f"{key}, 1D: {limits[key][0]:.3f}")
-    return limits
+    return {key: _row(f"{key}, 1D", (0.0,), progress, 1, hi=2.0, method=DG_ROWS[key], dim=1)[0] for key in rows}
 
 
 def table(per_cells=PER_CELL, nus=NUS, progress=print):
     """{"nu": nus, "limits": {"n integrator transverse": [[lo, hi] per nu]}} for every regular
     layout, integrator and transverse correction."""
-    limits = {}
-    for n in per_cells:
-        for integrator in ("euler", "rk2"):
-            for transverse in ("ctu", "dcu"):
-                key = _key(n, integrator, transverse)
-                limits[key] = [[round(x, 6) for x in bracket(n, integrator, transverse, nu)] for nu in nus]
-                progress(f"{key}: " + " ".join(f"{lo:.3f}" for lo, _ in limits[key]))
+    limits = {_key(*row): _row(_key(*row), nus, progress, *row)
+              for row in itertools.product(per_cells, ("euler", "rk2"), ("ctu", "dcu"))}
     return {"about": "CFL limits of 2D steps (skdgmpm.stability2d): DGMPM per layout 'n integrator "
                      "transverse' (limits), the DG methods per row of DG_ROWS (dg), one [stable, unstable] "
                      "CFL pair per Poisson's ratio",
