@@ -1,6 +1,5 @@
 """A first run's kernels compiled on two cores: while this process compiles the step's law pass
-(for its initial state, `GodunovScheme.at_rest`, MPM's stress pass; or beside it,
-`GodunovScheme.compile_law_pass`: DGMPM with several particles in a cell), a second process
+(for its initial state: `GodunovScheme.at_rest`, MPM's stress pass), a second process
 compiles the rest of the step (DGMPM's face passes, ADER's predictor and fluxes, MPM's transfers),
 which this one then loads from the cache instead of compiling it (numba compiles under one lock a
 process: two processes are the only way to use a second core).
@@ -50,8 +49,7 @@ DG_METHODS = ("ader-dgmpm", "ader-dgfem", "rk-dgfem")
 
 def wanted(scene):
     """Whether a run of ``scene`` should start a helper on its first compilation: every method's
-    run compiles the step's law pass itself (for its initial state, or beside the helper:
-    `GodunovScheme.compile_law_pass`); where the scene has `MAX_POINTS` particles or fewer (a mesh
+    run compiles the step's law pass itself (for its initial state); where the scene has `MAX_POINTS` particles or fewer (a mesh
     or particle file of `MAX_MESH_BYTES` or less; DG cells counted by their bytes, `DG_METHODS`),
     two cores are free to this process and $SKDGMPM_COMPILE_HELPER is not 0."""
     if os.environ.get(ENV, "1") == "0":

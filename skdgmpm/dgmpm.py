@@ -198,22 +198,21 @@ class DGMPM(GodunovScheme):
         cell): the face passes then read no trace (CTU: the cells split the fluctuations)."""
         return self.cellwise or bool(np.all(state != 0))
 
-    @property
-    def initial_pass(self):
-        """The initial state's law pass (`GodunovScheme.initial_pass`): with one particle per cell
-        the step's own (`at_rest`), which takes the state as given and writes its cell records
-        beside it; otherwise the step's pass forms each point's state from the nodes, and t = 0
-        takes the stand-alone stress pass and health check."""
-        return "law" if self.cellwise else "stress"
+    initial_pass = "law"                # the step's own (`at_rest`): t = 0 compiles no kernel of its own
 
     def at_rest(self, state, points):
-        """With one particle per cell, the step's law pass called as the step calls it (`step`),
-        the state's cell records written in it: t = 0 compiles no kernel of its own, neither the
-        stand-alone passes nor `cell_records` for the first step's faces. Where the step forms its
-        rows in that pass (`rows_in_law_pass`), they are those of a stage that adds nothing
-        (`_rows_at_rest`)."""
+        """The step's law pass called as the step calls it (`step`), so that t = 0 compiles no
+        kernel of its own. With one particle per cell it writes the state's cell records, which
+        the first step's faces read, and where the step forms the particles' rows in that pass
+        (`rows_in_law_pass`) they are those of a stage that adds nothing (`_rows_at_rest`). With
+        several particles in a cell the pass forms each point's state from nodal values (the back
+        map, a CSR product): here the identity's rows times the state's U, into a scratch U, U
+        kept as given (a product sums from +0.0: a -0.0 of U reads as +0.0 in the law)."""
         if not self.cellwise:
-            return super().at_rest(state, points)
+            indptr, indices, data = parallel.csr(self.map.S)
+            n = len(state.U)
+            identity = (np.arange(n + 1, dtype=indptr.dtype), np.arange(n, dtype=indices.dtype), np.ones(n, data.dtype))
+            return super().at_rest(state, points, (identity, state.U), into=np.empty_like(state.U))
         rec, rec_state = self._records()
         gather = self._rows_at_rest(state.U) if self.rows_in_law_pass else None   # rows U's: written onto U
         return super().at_rest(state, points, gather, (rec, self.point_cell, self.cell_normals, rec_state))
@@ -226,18 +225,6 @@ class DGMPM(GodunovScheme):
         nc, sides = U.shape[1], 0 if self.ctu is None else 2       # `interface_flux`'s corrections
         return CellRows(self.particles.cell, np.full(self.cell_faces.shape, -1, self.cell_faces.dtype), np.zeros(0),
                         np.zeros((0, nc)), np.zeros((0, sides, nc)), 0.0, -0.0, self.inv_volume, U, np.zeros((1, nc)))
-
-    def compile_law_pass(self, state):
-        """With several particles in a cell the initial state takes the stand-alone passes (its
-        step's pass forms each point's state from the nodes): the step's pass, compiled now, once
-        on nodal states at F = I into a scratch U, typed as `step` types it (the nodal stage a
-        (n_dofs, nc) array); nothing of it is kept."""
-        if self.cellwise:
-            return
-        n, d = self.n_dofs, self.d
-        nodal = system.join(np.broadcast_to(np.eye(d), (n, d, d)).copy(), np.zeros((n, d)))
-        scratch = ParticleState(state.t, np.empty_like(state.U), None, state.x, history=state.history)
-        super().at_rest(scratch, self.particles, (self.map.S, nodal))
 
     def initial_state(self, F, v, t=0.0):
         state = super().initial_state(F, v, t)

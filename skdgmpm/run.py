@@ -289,9 +289,7 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
               else nullcontext())
     try:
         with notice:                      # a line on stderr if the kernels are not in the cache
-            disc = build(scene)
-            if helper is not None and helper.running:       # beside it: the law's pass of the step
-                disc.stepper.compile_law_pass(disc.initial)
+            disc = build(scene)           # its initial state takes the step's law pass, beside the helper
         if steps is not None:             # the end time of that many first time steps [L23 eq 67]
             scene, t_end = _end_of_steps(scene, disc, steps)
         solution = exact_solution(scene)

@@ -138,11 +138,9 @@ class GodunovScheme:
     cfl_guard = "predict"        # or "largest" (method.cfl_guard)
     body_force = None            # b(X, t) -> (n, d) in m/s^2 (a manufactured solution's); None: no source
     stages = ()                  # the `stage` methods of a step, in the order they run
-    # the initial state's law pass, the step's own where it can be called on a given state, so that
-    # t = 0 compiles no kernel of its own: "law" (`constitutive_update`'s), "stress and health"
-    # (MPM's), "stress" then the stand-alone health check (DGMPM with nodal stages: its step pass
-    # forms each point's state from the nodes)
-    initial_pass = "stress"
+    # the initial state's law pass, the step's own, so that t = 0 compiles no kernel of its own:
+    # "law" (`constitutive_update`'s, `at_rest`) or "stress and health" (MPM's stress pass)
+    initial_pass = "law"
 
     def stage_times(self, reset=False):
         """{stage: (seconds, calls)} since the start (or the last reset), in the order of
@@ -275,29 +273,25 @@ class GodunovScheme:
         if self.initial_pass == "law":          # the step's `constitutive_update` pass (ADER-DGMPM, DGMPM)
             state.Q, state.history, health = self.at_rest(state, points)
             state.Q[:, d * d:] = v              # v as given, not p / rho0 recomputed
-        else:                                   # "stress"; "stress and health": MPM's step pass
-            P, state.history, *health = self.materials.stress_update(F, points.material, history,
-                                                                      assess=self.initial_pass == "stress and health")
+        else:                                   # "stress and health": MPM's step pass
+            P, state.history, health = self.materials.stress_update(F, points.material, history, assess=True)
             state.Q = system.join(P, v)
-            health = with_momenta(health[0] if health else None, U[:, d * d:], np.asarray(v, dtype=float))
+            health = with_momenta(health, U[:, d * d:], np.asarray(v, dtype=float))
         self.check(state, health)
         return state
 
-    def at_rest(self, state, points, gather=None, records=None):
+    def at_rest(self, state, points, gather=None, records=None, into=None):
         """(Q, history updated, `Health`) of the state's U at ``points`` from the law's pass of
         `constitutive_update` (`MaterialSet.update_and_assess`, with its ``gather`` and
-        ``records``), its arguments typed as that pass types them: an initial state that compiles
-        no kernel of its own. No motion: Delta t = 0, the old velocities a column view (U's
-        momenta: read only into positions that are not kept)."""
+        ``records``; a gathered U written into ``into``, default the state's U), its arguments
+        typed as that pass types them: an initial state that compiles no kernel of its own. No
+        motion: Delta t = 0, the old velocities a column view (U's momenta: read only into
+        positions that are not kept)."""
         no_motion = (state.x, state.U[:, self.d * self.d:], 0.0)
-        Q, history, health, _ = self.materials.update_and_assess(state.U, points.material, points.rho0,
+        U = state.U if into is None else into
+        Q, history, health, _ = self.materials.update_and_assess(U, points.material, points.rho0,
                                                                  state.history, no_motion, gather, records)
         return Q, history, health
-
-    def compile_law_pass(self, state):
-        """Compile the step's law pass now, where the initial state has not (`initial_pass`), for
-        a run whose compile helper compiles the rest of the step meanwhile
-        (`skdgmpm.compile_helper`). Nothing here: the initial state took the step's pass."""
 
     def step_with_cfl_guard(self, state, dt_max, attempt):
         """Run ``attempt(dt) -> (new state, boundary work)``; repeat with a smaller Delta t if the
