@@ -19,6 +19,7 @@ from .exact import INITIAL
 from .scene import exact_solution
 from .scene_keys import ignored_keys
 from .scheme import cell_values
+from . import guards
 from .errors import InputError, InstabilityError
 from .grid import Grid, facets_in_box, line, load_mesh, rectangle
 from .heap import release_free_pages, retain_freed_memory
@@ -34,6 +35,7 @@ class Discretisation:
     layout: np.ndarray           # parent coordinates of the per-cell layout (None for a file)
     stepper: object
     initial: object
+    cfl_default: str = None      # why the CFL is what it is, where the scene gives none and 1 is above the limit
 
 
 def build_mesh(scene):
@@ -154,7 +156,7 @@ def build(scene):
 
     bcs = [(name, _bc(scene, grid, name, spec, d)) for name, spec in (scene.get("bc") or {}).items()]
     method = scene.data["method"]
-    cfl = float(method.get("cfl", 1.0))
+    cfl = float(method.get("cfl", 1.0))    # without it, set below once the method's limit is known
     if not 0 < cfl <= 2:
         raise InputError(f"{scene.where('method.cfl')} = {cfl!r} must be in (0, 2]")
     name = method.get("name", "dgmpm")
@@ -254,8 +256,10 @@ def build(scene):
         raise InputError(f"{scene.where('initial')}: the initial state is not admissible "
                          f"({str(exc).split(' at step')[0]})") from None
     release_free_pages()                    # the set-up's freed temporaries: not resident under the step's peak
-    return Discretisation(scene, grid, stepper.particles, layout if name == "dgmpm" else None,
-                          stepper, initial)
+    disc = Discretisation(scene, grid, stepper.particles, layout if name == "dgmpm" else None, stepper, initial)
+    if "cfl" not in method:             # 1, or below the method's known limit (`guards.default_cfl`)
+        stepper.cfl, disc.cfl_default = guards.default_cfl(disc)
+    return disc
 
 
 def _picard_options(scene, method):

@@ -22,20 +22,27 @@ guards stop it earlier (exit 3, like the other health stops), or refuse it befor
   would never end. Up front, a run whose first Delta t would need more than ``run.step_limit``
   (default 1e7) steps to reach t_end is refused (E = 1e300 or rho = 1e-300 make Delta t ~ 0);
   reaching the limit during the run stops it.
-- **CFL above a known stability limit** (`stability_limit`): refused (exit 2) unless the scene sets
-  ``method.cfl_above_limit = true``. Known limits: first-order DGMPM, the von Neumann limit of
+- **CFL above a known stability limit** (`check_cfl`, `cfl_limit`): refused (exit 2) unless the
+  scene sets ``method.cfl_above_limit = true``; a scene without ``method.cfl`` takes one below the
+  limit (`default_cfl`). Known limits: first-order DGMPM, the von Neumann limit of
   its step (in 2D `skdgmpm.stability2d`'s table for regular layouts, else the layout's 1D limit,
   R18 §6, `skdgmpm.stability`); ADER and RK-DGFEM P = 1, 2, that of their 1D or 2D step (the
   same table); MPM, 1 (dt = h / (c + |v|)). The DGFEM and ADER steps are already scaled by
   1 / (2P + 1), and the scene admits CFL <= 2 for them.
 """
+import functools
+import math
+import warnings
+
 import numpy as np
 
+from . import compile_helper
 from .errors import InputError, InstabilityError
 
 MARGIN = 1.0
 COLLAPSE = 1e-3
 STEP_LIMIT = 10_000_000
+DEFAULT_SHARE = 0.9     # a scene without method.cfl, where the method's limit is below 1: this share of it
 
 
 ENERGY_POINTS = 20_000       # above this many points, the energy every 10 steps by default
@@ -133,3 +140,118 @@ def allowed_above_limit(scene):
 def mpm_limit(disc):
     """MPM: dt = CFL h / (c + |v|): a wave or a particle may cross at most one cell per step."""
     return 1.0
+
+
+@functools.lru_cache(maxsize=32)
+def _critical_cfl(layout, integrator):
+    from .stability import critical_cfl
+    return critical_cfl(list(layout), integrator, criterion="spectral")
+
+
+def _poisson_ratios(scene):
+    """nu of every material table of the scene, None where one gives none."""
+    tables = [scene.data["material"], *(r.get("material", {}) for r in scene.get("regions") or [])]
+    nus = [t.get("nu") for t in tables]
+    return None if any(isinstance(nu, bool) or not isinstance(nu, (int, float)) for nu in nus) else nus
+
+
+def _nus_text(nus):
+    return ", ".join(f"{nu:g}" for nu in dict.fromkeys(nus))
+
+
+def _dgmpm_limit(disc, coords, cfl):
+    """(CFL refused from, the limit, what it is) of a DGMPM layout, run at ``cfl`` (the hint
+    names the other transverse scheme where it admits ``cfl``): in 2D the von Neumann limit
+    of the 2D step from `skdgmpm.stability2d`'s table (regular layouts, materials that give nu),
+    else the 1D limit of the layout (R18 §6; in 2D an upper bound)."""
+    stepper, scene = disc.stepper, disc.scene
+    n = len(coords)
+    nus = _poisson_ratios(scene) if scene.dim == 2 else None
+    if nus is not None and np.allclose(coords, (np.arange(n) + 0.5) / n, rtol=0, atol=1e-9):
+        from .stability2d import limit as limit_2d, shown
+        pair = limit_2d(n, stepper.integrator, stepper.transverse, nus)
+        if pair is not None:
+            stable, unstable = pair
+            other = "dcu" if stepper.transverse == "ctu" else "ctu"
+            alternative = limit_2d(n, stepper.integrator, other, nus)
+            hint = (f"; with method.transverse = \"{other}\" it is {shown(alternative)}"
+                    if alternative is not None and alternative[1] > cfl >= unstable else "")
+            return unstable, stable, (
+                f"the 2D von Neumann limit {shown(pair)} of {stepper.integrator} with {stepper.transverse}, "
+                f"{n} x {n} particles a cell, nu = {_nus_text(nus)} "
+                f"(skdgmpm stability --dim 2 --per-cell {n}){hint}")
+    limit = _critical_cfl(coords, stepper.integrator)
+    return limit + 1e-6, limit, (f"the von Neumann limit {limit:.2f} of layout {list(coords)} with {stepper.integrator} "
+                                 f"(skdgmpm stability --layout ...)")
+
+
+def _dg_limit(disc):
+    """(CFL refused from, the limit, what it is) of a DG step (ADER-DGFEM, ADER-DGMPM, RK-DGFEM)
+    from `skdgmpm.stability2d`'s table, or None: in 2D a material without nu, an order or
+    integrator the table lacks, ADER-DGMPM particles other than P + 1 a direction (with P + 1 its
+    reconstruction interpolates them, and its step has ADER-DGFEM's limits), a particle file."""
+    from .stability2d import dg_key, dg_limit, dg_limit_1d, shown
+
+    stepper, scene = disc.stepper, disc.scene
+    name, order = scene.data["method"].get("name", "dgmpm"), stepper.order
+    key = dg_key(name, order, stepper.integrator)
+    if name == "ader-dgmpm" and (scene.get("particles.file") or compile_helper.per_axis(scene) != order + 1):
+        key = None
+    if key is None:
+        return None
+    nus = _poisson_ratios(scene) if scene.dim == 2 else None
+    pair = dg_limit_1d(key) if scene.dim == 1 else None if nus is None else dg_limit(key, nus)
+    if pair is None:
+        return None
+    stable, unstable = pair
+    what = f"the {scene.dim}D von Neumann limit {shown(pair)} of {name} P{order}"
+    what += f" with {stepper.integrator}" if name == "rk-dgfem" else ""
+    if scene.dim == 2:
+        what += (f", nu = {_nus_text(nus)} "
+                 f"(skdgmpm stability --dim 2 --method {name} --order {order})")
+    return unstable, stable, what
+
+
+def cfl_limit(disc, cfl):
+    """(CFL refused from, the limit, what it is) of the method's known stability limit, for a run
+    at ``cfl`` (a hint in the text where another choice admits it); None where none is known (P =
+    3, RK2 with P >= 2, a particle file): for DGMPM the von Neumann limit of its step, in 2D from
+    the analysis of the 2D step (`skdgmpm.stability2d`: regular layouts, every material with a
+    Poisson's ratio), else the 1D limit of the particle layout (R18 §6; in 2D an upper bound); for
+    the DG methods (ADER, RK-DGFEM) that of their step, 1D or 2D; for MPM 1."""
+    name = disc.scene.data["method"].get("name", "dgmpm")
+    if name == "mpm":
+        limit = mpm_limit(disc)
+        return limit + 1e-6, limit, "the MPM limit 1 (a wave or a particle crosses at most one cell a step)"
+    if disc.layout is not None:
+        coords = tuple(float(c) for c in np.unique(np.round(disc.layout[:, 0], 12)))
+        return _dgmpm_limit(disc, coords, cfl)
+    return _dg_limit(disc) if name != "dgmpm" else None
+
+
+def check_cfl(disc):
+    """Refuse a CFL above the method's known stability limit (`cfl_limit`); with
+    ``method.cfl_above_limit = true`` a warning only. Returns the limit, or None where none is
+    known."""
+    stepper, scene = disc.stepper, disc.scene
+    known = cfl_limit(disc, stepper.cfl)
+    if known is None:
+        return None
+    refused, limit, what = known
+    if stepper.cfl >= refused:
+        text = f"{scene.where('method.cfl')} = {stepper.cfl} exceeds {what}"
+        if not allowed_above_limit(scene):
+            raise InputError(f"{text}: the run would be unstable (method.cfl_above_limit = true runs it anyway)")
+        warnings.warn(text, stacklevel=3)
+    return limit
+
+
+def default_cfl(disc):
+    """(CFL, why) of a scene that gives no ``method.cfl``: 1, why None; or, where the method's
+    known limit (`cfl_limit`) is below 1, `DEFAULT_SHARE` of it rounded down to 0.01, why the
+    text that says so."""
+    known = cfl_limit(disc, 1.0)
+    if known is None or 1.0 < known[0]:
+        return 1.0, None
+    _, limit, what = known
+    return math.floor(100 * DEFAULT_SHARE * limit) / 100, f"{DEFAULT_SHARE:g} of {what}"

@@ -1,10 +1,8 @@
 """Run a scene: time loop with progress, energy history, error norms, outputs on disk."""
-import functools
 import signal
 import sys
 import threading
 import time
-import warnings
 from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,102 +16,6 @@ from .errors import InputError, InstabilityError, OutputError
 from .exact import relative_errors
 from .first_run import compile_notice
 from .scene import Scene, exact_solution, load_scene
-
-
-@functools.lru_cache(maxsize=32)
-def _critical_cfl(layout, integrator):
-    from .stability import critical_cfl
-    return critical_cfl(list(layout), integrator, criterion="spectral")
-
-
-def _poisson_ratios(scene):
-    """nu of every material table of the scene, None where one gives none."""
-    tables = [scene.data["material"], *(r.get("material", {}) for r in scene.get("regions") or [])]
-    nus = [t.get("nu") for t in tables]
-    return None if any(isinstance(nu, bool) or not isinstance(nu, (int, float)) for nu in nus) else nus
-
-
-def _nus_text(nus):
-    return ", ".join(f"{nu:g}" for nu in dict.fromkeys(nus))
-
-
-def _dgmpm_limit(disc, coords):
-    """(CFL refused from, the limit, what it is) of a DGMPM layout: in 2D the von Neumann limit
-    of the 2D step from `skdgmpm.stability2d`'s table (regular layouts, materials that give nu),
-    else the 1D limit of the layout (R18 §6; in 2D an upper bound)."""
-    stepper, scene = disc.stepper, disc.scene
-    n = len(coords)
-    nus = _poisson_ratios(scene) if scene.dim == 2 else None
-    if nus is not None and np.allclose(coords, (np.arange(n) + 0.5) / n, rtol=0, atol=1e-9):
-        from .stability2d import limit as limit_2d, shown
-        pair = limit_2d(n, stepper.integrator, stepper.transverse, nus)
-        if pair is not None:
-            stable, unstable = pair
-            other = "dcu" if stepper.transverse == "ctu" else "ctu"
-            alternative = limit_2d(n, stepper.integrator, other, nus)
-            hint = (f"; with method.transverse = \"{other}\" it is {shown(alternative)}"
-                    if alternative is not None and alternative[1] > stepper.cfl >= unstable else "")
-            return unstable, stable, (
-                f"the 2D von Neumann limit {shown(pair)} of {stepper.integrator} with {stepper.transverse}, "
-                f"{n} x {n} particles a cell, nu = {_nus_text(nus)} "
-                f"(skdgmpm stability --dim 2 --per-cell {n}){hint}")
-    limit = _critical_cfl(coords, stepper.integrator)
-    return limit + 1e-6, limit, (f"the von Neumann limit {limit:.2f} of layout {list(coords)} with {stepper.integrator} "
-                                 f"(skdgmpm stability --layout ...)")
-
-
-def _dg_limit(disc):
-    """(CFL refused from, the limit, what it is) of a DG step (ADER-DGFEM, ADER-DGMPM, RK-DGFEM)
-    from `skdgmpm.stability2d`'s table, or None: in 2D a material without nu, an order or
-    integrator the table lacks, ADER-DGMPM particles other than P + 1 a direction (with P + 1 its
-    reconstruction interpolates them, and its step has ADER-DGFEM's limits), a particle file."""
-    from .stability2d import dg_key, dg_limit, dg_limit_1d, shown
-
-    stepper, scene = disc.stepper, disc.scene
-    name, order = scene.data["method"].get("name", "dgmpm"), stepper.order
-    key = dg_key(name, order, stepper.integrator)
-    if name == "ader-dgmpm" and (scene.get("particles.file") or compile_helper.per_axis(scene) != order + 1):
-        key = None
-    if key is None:
-        return None
-    nus = _poisson_ratios(scene) if scene.dim == 2 else None
-    pair = dg_limit_1d(key) if scene.dim == 1 else None if nus is None else dg_limit(key, nus)
-    if pair is None:
-        return None
-    stable, unstable = pair
-    what = f"the {scene.dim}D von Neumann limit {shown(pair)} of {name} P{order}"
-    what += f" with {stepper.integrator}" if name == "rk-dgfem" else ""
-    if scene.dim == 2:
-        what += (f", nu = {_nus_text(nus)} "
-                 f"(skdgmpm stability --dim 2 --method {name} --order {order})")
-    return unstable, stable, what
-
-
-def check_cfl(disc):
-    """Refuse a CFL above the method's known stability limit (`skdgmpm.guards`): for DGMPM the
-    von Neumann limit of its step, in 2D from the analysis of the 2D step (`skdgmpm.stability2d`:
-    regular layouts, every material with a Poisson's ratio), else the 1D limit of the particle
-    layout (R18 §6; in 2D an upper bound); for the DG methods (ADER, RK-DGFEM) that of their
-    step, 1D or 2D; for MPM 1. With ``method.cfl_above_limit = true`` a warning only. Returns the
-    limit, or None where none is known (P = 3, RK2 with P >= 2, a particle file)."""
-    stepper, scene = disc.stepper, disc.scene
-    name = scene.data["method"].get("name", "dgmpm")
-    if name == "mpm":
-        limit, what = guards.mpm_limit(disc), "the MPM limit 1 (a wave or a particle crosses at most one cell a step)"
-        refused = limit + 1e-6
-    elif disc.layout is not None:
-        coords = tuple(float(c) for c in np.unique(np.round(disc.layout[:, 0], 12)))
-        refused, limit, what = _dgmpm_limit(disc, coords)
-    elif name != "dgmpm" and (dg := _dg_limit(disc)) is not None:
-        refused, limit, what = dg
-    else:
-        return None
-    if stepper.cfl >= refused:
-        text = f"{scene.where('method.cfl')} = {stepper.cfl} exceeds {what}"
-        if not guards.allowed_above_limit(scene):
-            raise InputError(f"{text}: the run would be unstable (method.cfl_above_limit = true runs it anyway)")
-        warnings.warn(text, stacklevel=3)
-    return limit
 
 
 @dataclass
@@ -162,6 +64,8 @@ class Result:
         }
         if self.message:
             out["message"] = self.message
+        if self.disc.cfl_default:
+            out["cfl_default"] = self.disc.cfl_default
         picard = getattr(st, "picard", None)
         if picard is not None:
             # per step: the most iterations of a cell (each cell stops at its own convergence)
@@ -293,7 +197,9 @@ def run(scene=None, overrides=(), out=None, force=False, progress=True, frames=N
         if steps is not None:             # the end time of that many first time steps [L23 eq 67]
             scene, t_end = _end_of_steps(scene, disc, steps)
         solution = exact_solution(scene)
-        check_cfl(disc)
+        guards.check_cfl(disc)
+        if disc.cfl_default and progress:
+            print(f"note: method.cfl not set: {disc.stepper.cfl}, {disc.cfl_default}", file=sys.stderr)
         guards.check_step_count(disc, t_end)
         if helper is not None:            # its kernels into the cache before the first step
             helper.join()

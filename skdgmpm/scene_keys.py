@@ -155,8 +155,9 @@ KEYS = (
         "particles' own arrays (R18 §5 as it reduces there: the same numbers up to round-off, without "
         "the nodal arrays); nodes: R18's nodal stages (projection, nodal update, back map) always",
         methods=("dgmpm",)),
-    Key("method.cfl", "", "1.0", "0.5",
-        "Courant number, in (0, 2]: dt = CFL h_min / c_max (DG methods of order P: / (2P + 1))"),
+    Key("method.cfl", "", "1.0, or 0.9 of the method's known limit where that is below 1", "0.5",
+        "Courant number, in (0, 2]: dt = CFL h_min / c_max (DG methods of order P: / (2P + 1)); unset, "
+        "the run says which it took where not 1 (e.g. 2D DGMPM with DCU: 0.58, with nu = 0.3)"),
     Key("method.order", "", "1", "2", "polynomial order P, 1..5 (dgmpm: 1 only)",
         methods=("dgmpm", *HIGH_ORDER)),
     Key("method.mls_order", "", "order", "1", "order of the moving-least-squares fit of the particles",

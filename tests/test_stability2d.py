@@ -1,6 +1,7 @@
 """Linear stability of the 2D DGMPM step (skdgmpm.stability2d) and the run's check against it."""
 
 import json
+import re
 import warnings
 
 import numpy as np
@@ -9,8 +10,11 @@ import pytest
 from skdgmpm import stability as st1
 from skdgmpm import stability2d as st
 from skdgmpm.cli import main
+from skdgmpm.build import build
 from skdgmpm.errors import InputError
+from skdgmpm.guards import check_cfl
 from skdgmpm.run import run
+from skdgmpm.scene import load_scene
 
 ALONG_X = np.stack([np.linspace(-np.pi, np.pi, 64, endpoint=False), np.zeros(64)], axis=1)
 
@@ -177,13 +181,54 @@ def test_the_run_refuses_a_cfl_above_the_2d_limit():
 
 
 def test_the_refusal_names_the_transverse_correction_that_runs_the_cfl():
-    """A 2D scene that sets nothing of the method (DGMPM, Euler, DCU, CFL 1) is refused; the
+    """A 2D scene at CFL 1 with the method's defaults (DGMPM, Euler, DCU) is refused; the
     message says that CTU's limit is 1 (and RK2's refusal at CFL 1 that DCU's is)."""
     with pytest.raises(InputError, match=r"limit 0.651 of euler with dcu, .*; with method.transverse = \"ctu\" "
                                          r"it is 1.0:"):
         run("standing_wave_2d", ["particles.per_cell=1", "method.cfl=1.0"], progress=False)
     with pytest.raises(InputError, match=r"limit 0.748 of rk2 with ctu, .*; with method.transverse = \"dcu\" it is"):
         run("plate_impact_neohookean_2d", ['method.integrator="rk2"'], progress=False)
+
+
+def _without_cfl(name, overrides):
+    scene = load_scene(name).with_overrides(overrides)
+    del scene.data["method"]["cfl"]
+    return scene
+
+
+@pytest.mark.parametrize("name, overrides, cfl, why", [
+    ("standing_wave_2d", ["particles.per_cell=1"], 0.58,
+     r"0.9 of the 2D von Neumann limit 0.651 of euler with dcu, 1 x 1 particles a cell, nu = 0.3 .*"
+     r"with method.transverse = \"ctu\" it is 1.0"),
+    ("standing_wave_2d", ["particles.per_cell=1", 'method.transverse="ctu"'], 1.0, None),
+    ("bar_elastic_1d", [], 1.0, None),
+    ("bar_elastic_1d", ["particles.per_cell=2"], 0.61, r"0.9 of the von Neumann limit 0.69 of layout \[0.25, 0.75\]"),
+    ("bar_elastic_1d", ['method.name="ader-dgfem"', "method.order=2"], 0.76,
+     r"0.9 of the 1D von Neumann limit 0.854 of ader-dgfem P2"),
+    ("bar_elastic_1d", ['method.name="mpm"'], 1.0, None),
+], ids=["2d-dcu", "2d-ctu", "1d-one-particle", "1d-two-particles", "1d-ader-p2", "mpm"])
+def test_a_scene_without_a_cfl_takes_one_below_the_methods_limit(name, overrides, cfl, why):
+    """Unset, method.cfl is 1 where the method's known limit admits it (CFL 1 exactness of one
+    particle a cell in 1D, CTU in 2D), else 0.9 of that limit, rounded down to 0.01: 0.9 x 0.651,
+    0.9 x 0.6861 (R18's two particles a cell, `skdgmpm.stability`), 0.9 x 0.854. The check then
+    passes it, and the discretisation says why."""
+    disc = build(_without_cfl(name, [*overrides, "grid.cells=8" if name == "bar_elastic_1d" else "grid.cells=[4, 4]"]))
+    assert disc.stepper.cfl == cfl
+    if why is None:
+        assert disc.cfl_default is None
+    else:
+        assert re.match(why, disc.cfl_default) and disc.stepper.cfl < check_cfl(disc)
+
+
+def test_a_run_without_a_cfl_says_which_it_took(capsys):
+    """The 2D scene with the method's defaults runs (it was refused at CFL 1), says the CFL it took
+    and why on stderr, and its summary holds both."""
+    r = run(_without_cfl("standing_wave_2d", ["particles.per_cell=1", "grid.cells=[4, 4]", "run.t_end=2e-5"]))
+    err = capsys.readouterr().err
+    assert r.status == "ok" and r.stepper.cfl == 0.58
+    assert "note: method.cfl not set: 0.58, 0.9 of the 2D von Neumann limit 0.651" in err
+    summary = r.summary()
+    assert summary["cfl"] == 0.58 and summary["cfl_default"].startswith("0.9 of the 2D von Neumann limit 0.651")
 
 
 def test_a_layout_the_table_lacks_falls_back_to_the_1d_limit():
