@@ -182,7 +182,7 @@ def _dgmpm_limit(disc, coords, cfl):
                 f"(skdgmpm stability --dim 2 --per-cell {n}){hint}")
     limit = _critical_cfl(coords, stepper.integrator)
     return limit + 1e-6, limit, (f"the von Neumann limit {limit:.2f} of layout {list(coords)} with {stepper.integrator} "
-                                 f"(skdgmpm stability --layout ...)")
+                                 f"(skdgmpm stability --layout {','.join(f'{c:g}' for c in coords)})")
 
 
 def _dg_limit(disc):
