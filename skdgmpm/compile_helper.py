@@ -49,9 +49,10 @@ DG_METHODS = ("ader-dgmpm", "ader-dgfem", "rk-dgfem")
 
 def wanted(scene):
     """Whether a run of ``scene`` should start a helper on its first compilation: every method's
-    run compiles the step's law pass itself (for its initial state); where the scene has `MAX_POINTS` particles or fewer (a mesh
-    or particle file of `MAX_MESH_BYTES` or less; DG cells counted by their bytes, `DG_METHODS`),
-    two cores are free to this process and $SKDGMPM_COMPILE_HELPER is not 0."""
+    run compiles the step's law pass itself (for its initial state); where the scene has
+    `MAX_POINTS` particles or fewer (a mesh or particle file of `MAX_MESH_BYTES` or less; DG cells
+    counted by their bytes, `DG_METHODS`), two cores are free to this process and
+    $SKDGMPM_COMPILE_HELPER is not 0."""
     if os.environ.get(ENV, "1") == "0":
         return False
     try:

@@ -50,7 +50,7 @@ from .faces import interior_faces
 from .integrators import INTEGRATORS
 from .quadrature import ParticleMap, particle_operators
 from .riemann import _not_hyperbolic
-from .scheme import GodunovScheme, GridState, ParticleState, cell_values, stage
+from .scheme import GodunovScheme, GridState, cell_values, stage
 
 
 @dataclass
@@ -211,7 +211,8 @@ class DGMPM(GodunovScheme):
         if not self.cellwise:
             indptr, indices, data = parallel.csr(self.map.S)
             n = len(state.U)
-            identity = (np.arange(n + 1, dtype=indptr.dtype), np.arange(n, dtype=indices.dtype), np.ones(n, data.dtype))
+            identity = (np.arange(n + 1, dtype=indptr.dtype), np.arange(n, dtype=indices.dtype),
+                        np.ones(n, data.dtype))     # typed as the back map's CSR: the step's kernel
             return super().at_rest(state, points, (identity, state.U), into=np.empty_like(state.U))
         rec, rec_state = self._records()
         gather = self._rows_at_rest(state.U) if self.rows_in_law_pass else None   # rows U's: written onto U
