@@ -117,7 +117,7 @@ def _cmd_stability(args):
 
 
 def _stability_of_steps(args):
-    from . import stability2d
+    from . import guards, stability2d
 
     if args.per_cell < 1:
         raise InputError(f"skdgmpm stability: --per-cell {args.per_cell} must be a positive integer")
@@ -142,6 +142,9 @@ def _stability_of_steps(args):
         report = {"order": args.order, **method, "cfl": pair[0]}
         print(f"order {args.order}{', ' + method['integrator'] if 'integrator' in method else ''}: "
               f"CFL limit {stability2d.shown(pair)} (the method's CFL: dt = CFL h / ((2P + 1) c) for P >= 1)")
+        grows = guards.grows_at_every_cfl(args.method, args.order, method.get("integrator"))
+        if grows is not None:       # the bracket is where the growth falls below the analysis's tolerance
+            print(f"  not a limit: {grows}; below {pair[0]:.3f} each step grows by less than 1e-9")
     print("CFL limit: the largest CFL at which no Fourier mode of the step grows (to 0.002, below);")
     print("  skdgmpm run refuses a CFL above it (method.cfl_above_limit = true runs it anyway).")
     if args.json:

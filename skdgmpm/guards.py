@@ -26,8 +26,8 @@ guards stop it earlier (exit 3, like the other health stops), or refuse it befor
   scene sets ``method.cfl_above_limit = true``; a scene without ``method.cfl`` takes one below the
   limit (`default_cfl`). Known limits: first-order DGMPM, the von Neumann limit of
   its step (in 2D `skdgmpm.stability2d`'s table for regular layouts, else the layout's 1D limit,
-  R18 §6, `skdgmpm.stability`); ADER and RK-DGFEM P = 1, 2, that of their 1D or 2D step (the
-  same table); MPM, 1 (dt = h / (c + |v|)). The DGFEM and ADER steps are already scaled by
+  R18 §6, `skdgmpm.stability`); ADER and RK-DGFEM P = 1, 2 (in 1D also 3), that of their 1D or
+  2D step (the same table); MPM, 1 (dt = h / (c + |v|)). The DGFEM and ADER steps are already scaled by
   1 / (2P + 1), and the scene admits CFL <= 2 for them.
 """
 import functools
@@ -194,7 +194,7 @@ def _dg_limit(disc):
 
     stepper, scene = disc.stepper, disc.scene
     name, order = scene.data["method"].get("name", "dgmpm"), stepper.order
-    key = dg_key(name, order, stepper.integrator)
+    key = dg_key(name, order, stepper.integrator, scene.dim)
     if name == "ader-dgmpm" and (scene.get("particles.file") or compile_helper.per_axis(scene) != order + 1):
         key = None
     if key is None:
@@ -229,13 +229,30 @@ def cfl_limit(disc, cfl):
     return _dg_limit(disc) if name != "dgmpm" else None
 
 
+def grows_at_every_cfl(name, order, integrator):
+    """Why no CFL makes this DG step stable, or None: RK2 with P >= 2 (RK order below P + 1) and
+    ADER with P >= 4 grow slowly at every CFL (`skdgmpm.stability2d`'s analysis; for ADER also
+    an independent ADER-DG, tests/test_stability2d.py)."""
+    if name == "rk-dgfem" and integrator == "rk2" and order >= 2:
+        return (f"rk-dgfem P{order} with rk2 grows at every CFL, slowly (P2: 1 + 5.6e-6 a step at 0.4): a long "
+                f"run grows; with rk4 it does not")
+    if name in ("ader-dgfem", "ader-dgmpm") and order >= 4:
+        return (f"{name} P{order} grows at every CFL, slowly (1D: 1 + 1.1e-6 a step at 0.3 for P4, 1 + 1.3e-5 for "
+                f"P5): a long run grows")
+    return None
+
+
 def check_cfl(disc):
     """Refuse a CFL above the method's known stability limit (`cfl_limit`); with
     ``method.cfl_above_limit = true`` a warning only. Returns the limit, or None where none is
-    known."""
+    known (a DG step that grows at every CFL: a warning, `grows_at_every_cfl`)."""
     stepper, scene = disc.stepper, disc.scene
     known = cfl_limit(disc, stepper.cfl)
     if known is None:
+        name = scene.data["method"].get("name", "dgmpm")
+        why = grows_at_every_cfl(name, getattr(stepper, "order", 1), stepper.integrator)
+        if why is not None:
+            warnings.warn(f"{why} (docs/choices.md, the CFL check)", stacklevel=3)
         return None
     refused, limit, what = known
     if stepper.cfl >= refused:

@@ -172,12 +172,16 @@ def _key(per_cell, integrator, transverse):
 
 #: The DG methods' rows of the table: ADER-DGMPM's step has ADER-DGFEM's limits where it has P + 1
 #: particles a direction (L23's S1, S2: its reconstruction then interpolates them).
-#: Left out: P = 3 (a row takes over half an hour here: 16 points a cell, RK4's reach 4) and RK2
-#: with P >= 2, which grows at every CFL, if slowly (1 + 2.6e-10 a step at 0.15, 1 + 5.6e-6 at 0.4):
-#: its limit would be the tolerance's.
+#: Left out: P = 3 in 2D (a row takes over half an hour here: 16 points a cell, RK4's reach 4; in
+#: 1D a second, `DG_ROWS_1D`), RK2 with P >= 2, which grows at every CFL, if slowly (1 + 2.6e-10 a
+#: step at 0.15, 1 + 5.6e-6 at 0.4), and ADER with P >= 4, which does too (1D: 1 + 1.1e-6 a step
+#: at 0.3 for P = 4, 1 + 1.3e-5 for P = 5; the scheme's own, tests/test_stability2d.py): their
+#: limits would be the tolerance's.
 DG_ROWS = {**{f"ader {p}": {"name": "ader-dgfem", "order": p} for p in (1, 2)},
            "rk-dgfem 1 rk2": {"name": "rk-dgfem", "order": 1, "integrator": "rk2"},
            **{f"rk-dgfem {p} rk4": {"name": "rk-dgfem", "order": p, "integrator": "rk4"} for p in (1, 2)}}
+DG_ROWS_1D = {**DG_ROWS, "ader 3": {"name": "ader-dgfem", "order": 3},
+              "rk-dgfem 3 rk4": {"name": "rk-dgfem", "order": 3, "integrator": "rk4"}}
 
 
 def shown(pair):
@@ -187,10 +191,10 @@ def shown(pair):
     return "1.0" if stable <= 1.0 <= unstable else f"{stable:.3f}"
 
 
-def dg_key(name, order, integrator=None):
-    """The table's row of a DG method (None where it has none)."""
+def dg_key(name, order, integrator=None, dim=2):
+    """The table's row of a DG method in ``dim`` dimensions (None where it has none)."""
     key = f"ader {order}" if name in ("ader-dgfem", "ader-dgmpm") else f"rk-dgfem {order} {integrator}"
-    return key if key in DG_ROWS else None
+    return key if key in (DG_ROWS if dim == 2 else DG_ROWS_1D) else None
 
 
 def _row(key, nus, progress, *args, **keys):
@@ -205,9 +209,9 @@ def dg_table(rows=tuple(DG_ROWS), nus=NUS, progress=print):
     return {key: _row(key, nus, progress, 1, method=DG_ROWS[key]) for key in rows}
 
 
-def dg_table_1d(rows=tuple(DG_ROWS), progress=print):
+def dg_table_1d(rows=tuple(DG_ROWS_1D), progress=print):
     """{row: [lo, hi]} of the DG methods' 1D steps (one wave speed: no nu)."""
-    return {key: _row(f"{key}, 1D", (0.0,), progress, 1, hi=2.0, method=DG_ROWS[key], dim=1)[0] for key in rows}
+    return {key: _row(f"{key}, 1D", (0.0,), progress, 1, hi=2.0, method=DG_ROWS_1D[key], dim=1)[0] for key in rows}
 
 
 def table(per_cells=PER_CELL, nus=NUS, progress=print):
