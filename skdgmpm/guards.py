@@ -190,7 +190,7 @@ def _dg_limit(disc):
     from `skdgmpm.stability2d`'s table, or None: in 2D a material without nu, an order or
     integrator the table lacks, ADER-DGMPM particles other than P + 1 a direction (with P + 1 its
     reconstruction interpolates them, and its step has ADER-DGFEM's limits), a particle file."""
-    from .stability2d import dg_key, dg_limit, dg_limit_1d, shown
+    from .stability2d import SLOW_GROWTH, dg_key, dg_limit, dg_limit_1d, shown
 
     stepper, scene = disc.stepper, disc.scene
     name, order = scene.data["method"].get("name", "dgmpm"), stepper.order
@@ -206,6 +206,8 @@ def _dg_limit(disc):
     stable, unstable = pair
     what = f"the {scene.dim}D von Neumann limit {shown(pair)} of {name} P{order}"
     what += f" with {stepper.integrator}" if name == "rk-dgfem" else ""
+    if key in SLOW_GROWTH:                  # a knee: the step grows slowly below it (`grows_at_every_cfl`)
+        what += f" (below it a step grows by at most {SLOW_GROWTH[key]:g}, beyond it by far more)"
     if scene.dim == 2:
         what += (f", nu = {_nus_text(nus)} "
                  f"(skdgmpm stability --dim 2 --method {name} --order {order})")
@@ -237,30 +239,27 @@ def grows_at_every_cfl(name, order, integrator):
         return (f"rk-dgfem P{order} with rk2 grows at every CFL, slowly (P2: 1 + 5.6e-6 a step at 0.4): a long "
                 f"run grows; with rk4 it does not")
     if name in ("ader-dgfem", "ader-dgmpm") and order >= 4:
-        return (f"{name} P{order} grows at every CFL, slowly (1D: 1 + 1.1e-6 a step at 0.3 for P4, 1 + 1.3e-5 for "
-                f"P5): a long run grows")
+        return (f"{name} P{order} grows at every CFL, slowly below its knee (1D: 1 + 1.1e-6 a step at 0.3 for P4, "
+                f"1 + 1.3e-5 for P5): a long run grows")
     return None
 
 
 def check_cfl(disc):
     """Refuse a CFL above the method's known stability limit (`cfl_limit`); with
     ``method.cfl_above_limit = true`` a warning only. Returns the limit, or None where none is
-    known (a DG step that grows at every CFL: a warning, `grows_at_every_cfl`)."""
+    known. A DG step that grows at every CFL gets a warning too (`grows_at_every_cfl`)."""
     stepper, scene = disc.stepper, disc.scene
     known = cfl_limit(disc, stepper.cfl)
-    if known is None:
-        name = scene.data["method"].get("name", "dgmpm")
-        why = grows_at_every_cfl(name, getattr(stepper, "order", 1), stepper.integrator)
-        if why is not None:
-            warnings.warn(f"{why} (docs/choices.md, the CFL check)", stacklevel=3)
-        return None
-    refused, limit, what = known
-    if stepper.cfl >= refused:
-        text = f"{scene.where('method.cfl')} = {stepper.cfl} exceeds {what}"
+    if known is not None and stepper.cfl >= known[0]:
+        text = f"{scene.where('method.cfl')} = {stepper.cfl} exceeds {known[2]}"
         if not allowed_above_limit(scene):
             raise InputError(f"{text}: the run would be unstable (method.cfl_above_limit = true runs it anyway)")
         warnings.warn(text, stacklevel=3)
-    return limit
+    why = grows_at_every_cfl(scene.data["method"].get("name", "dgmpm"), getattr(stepper, "order", 1),
+                             stepper.integrator)
+    if why is not None:
+        warnings.warn(f"{why} (docs/choices.md, the CFL check)", stacklevel=3)
+    return None if known is None else known[1]
 
 
 def default_cfl(disc):

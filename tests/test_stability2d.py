@@ -221,11 +221,16 @@ def test_a_dg_step_that_grows_at_every_cfl_is_said_to(overrides, warned):
 
 
 def test_the_command_says_when_its_bracket_is_not_a_limit(capsys):
+    """ADER P4 in 1D: the knee of the table (0.627), said to be one; in 2D, where the table has
+    none, the bracket of growth 1e-9, said not to be a limit; P3: a limit."""
     assert main(["stability", "--method", "ader-dgfem", "--order", "4"]) == 0
     out = capsys.readouterr().out
-    assert "not a limit: ader-dgfem P4 grows at every CFL" in out
+    assert "CFL limit 0.627" in out and "its knee: ader-dgfem P4 grows at every CFL" in out
+    assert main(["stability", "--method", "rk-dgfem", "--order", "2", "--integrator", "rk2"]) == 0
+    assert "not a limit: rk-dgfem P2 with rk2 grows at every CFL" in capsys.readouterr().out
     assert main(["stability", "--method", "ader-dgfem", "--order", "3"]) == 0
-    assert "not a limit" not in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "not a limit" not in out and "knee" not in out
 
 
 def test_the_run_refuses_a_dg_cfl_above_the_1d_limit():
@@ -233,9 +238,14 @@ def test_the_run_refuses_a_dg_cfl_above_the_1d_limit():
     with pytest.raises(InputError, match=r"method.cfl = 0.9 exceeds the 1D von Neumann limit 0.854 of ader-dgfem P2"):
         run("bar_elastic_1d", ['method.name="ader-dgfem"', "method.order=2", "method.cfl=0.9"], progress=False)
     table = json.loads(st.TABLE.read_text(encoding="utf-8"))
-    for key in ("ader 2", "ader 3", "rk-dgfem 3 rk4"):
-        assert st.bracket(1, nu=0.0, hi=2.0, method=st.DG_ROWS_1D[key], dim=1) == pytest.approx(table["dg_1d"][key],
-                                                                                                   abs=1e-6)
+    for key in ("ader 2", "ader 3", "ader 4", "rk-dgfem 3 rk4"):
+        pair = st.bracket(1, nu=0.0, hi=2.0, method=st.DG_ROWS_1D[key], dim=1, growth=st.SLOW_GROWTH.get(key, 1e-9))
+        assert pair == pytest.approx(table["dg_1d"][key], abs=1e-6)
+    # ADER P4's knee: slow growth just below it, fast just above (the engine's step, 1D)
+    lo, hi = table["dg_1d"]["ader 4"]
+    slow, fast = (st.spectral_radius(st.step_blocks(1, cfl=c, nu=0.0, method=st.DG_ROWS_1D["ader 4"], dim=1)) - 1
+                  for c in (lo - 0.03, hi + 0.03))
+    assert 1e-9 < slow < 1e-5 and fast > 1e-2
     with pytest.raises(InputError, match=r"method.cfl = 0.75 exceeds the 1D von Neumann limit 0.727 of ader-dgfem P3"):
         run("bar_elastic_1d", ['method.name="ader-dgfem"', "method.order=3", "method.cfl=0.75"], progress=False)
 
@@ -275,8 +285,10 @@ def _without_cfl(name, overrides):
      r"0.9 of the 1D von Neumann limit 0.854 of ader-dgfem P2"),
     ("bar_elastic_1d", ['method.name="ader-dgfem"', "method.order=3"], 0.65,
      r"0.9 of the 1D von Neumann limit 0.727 of ader-dgfem P3"),
+    ("bar_elastic_1d", ['method.name="ader-dgfem"', "method.order=4"], 0.56,
+     r"0.9 of the 1D von Neumann limit 0.627 of ader-dgfem P4 \(below it a step grows by at most 0.0001"),
     ("bar_elastic_1d", ['method.name="mpm"'], 1.0, None),
-], ids=["2d-dcu", "2d-ctu", "1d-one-particle", "1d-two-particles", "1d-ader-p2", "1d-ader-p3", "mpm"])
+], ids=["2d-dcu", "2d-ctu", "1d-one-particle", "1d-two-particles", "1d-ader-p2", "1d-ader-p3", "1d-ader-p4", "mpm"])
 def test_a_scene_without_a_cfl_takes_one_below_the_methods_limit(name, overrides, cfl, why):
     """Unset, method.cfl is 1 where the method's known limit admits it (CFL 1 exactness of one
     particle a cell in 1D, CTU in 2D), else 0.9 of that limit, rounded down to 0.01: 0.9 x 0.651,
