@@ -115,7 +115,7 @@ def test_the_dg_methods_limits_predict_their_runs(method, cfl, unstable):
     _standing_wave_500_steps(keys, cfl, 3, unstable)
 
 
-@pytest.mark.parametrize("key, nu", [("ader 1", 0.3), ("rk-dgfem 1 rk2", 0.45)])
+@pytest.mark.parametrize("key, nu", [("ader 1", 0.3), ("rk-dgfem 1 rk2", 0.45), ("ader 3", 0.3)])
 def test_the_dg_rows_of_the_table_are_what_the_analysis_computes(key, nu):
     table = json.loads(st.TABLE.read_text(encoding="utf-8"))
     stored = table["dg"][key][table["nu"].index(nu)]
@@ -138,6 +138,10 @@ def test_the_run_refuses_a_dg_cfl_above_the_2d_limit():
     with pytest.raises(InputError, match=r"exceeds the 2D von Neumann limit 0.651 of rk-dgfem P1 with rk2"):
         run("standing_wave_2d", ['method.name="rk-dgfem"', "method.order=1", 'method.integrator="rk2"',
                                  "method.cfl=0.66"], progress=False)
+    # L23's S3T3 (ADER-DGMPM, 4 x 4 particles a cell at 1/5 .. 4/5) reads ADER-DGFEM P3's row
+    with pytest.raises(InputError, match=r"method.cfl = 0.5 exceeds the 2D von Neumann limit 0.466 of ader-dgmpm P3"):
+        run("standing_wave_2d", ['method.name="ader-dgmpm"', "method.order=3", "particles.per_cell=[0.2, 0.4, 0.6, 0.8]",
+                                 "method.cfl=0.5"], progress=False)
 
 
 @pytest.mark.parametrize("method, reference", [
