@@ -26,8 +26,8 @@ guards stop it earlier (exit 3, like the other health stops), or refuse it befor
   scene sets ``method.cfl_above_limit = true``; a scene without ``method.cfl`` takes one below the
   limit (`default_cfl`). Known limits: first-order DGMPM, the von Neumann limit of
   its step (in 2D `skdgmpm.stability2d`'s table for regular layouts, else the layout's 1D limit,
-  R18 §6, `skdgmpm.stability`); ADER P = 1-3 and RK-DGFEM P = 1, 2 (in 1D also RK-DGFEM 3, and
-  ADER 4, 5 at the knee of their slow growth), that of their 1D or 2D step (the same table); MPM,
+  R18 §6, `skdgmpm.stability`); ADER and RK-DGFEM P = 1-3 (RK2: P = 1; in 1D also ADER 4, 5 at
+  the knee of their slow growth), that of their 1D or 2D step (the same table); MPM,
   1 (dt = h / (c + |v|)). The DGFEM and ADER steps are already scaled by 1 / (2P + 1), and the
   scene admits CFL <= 2 for them.
 """
@@ -266,8 +266,8 @@ def check_cfl(disc):
 def default_cfl(disc):
     """(CFL, why) of a scene that gives no ``method.cfl``: 1, why None; or, where the method's
     known limit (`cfl_limit`) is below 1, `DEFAULT_SHARE` of it rounded down to 0.01, why the
-    text that says so. A 2D DG step the table lacks (RK-DGFEM P3, ADER P >= 4) takes half its 1D
-    limit in place of the 2D one (`_half_the_1d_limit`)."""
+    text that says so. A 2D DG step the table lacks (ADER P4, P5) takes half its 1D limit in place
+    of the 2D one (`_half_the_1d_limit`)."""
     known = cfl_limit(disc, 1.0) or _half_the_1d_limit(disc)
     if known is None or 1.0 < known[0]:
         return 1.0, None
