@@ -117,7 +117,7 @@ def _cmd_stability(args):
 
 
 def _stability_of_steps(args):
-    from . import guards, stability2d
+    from . import stability2d
 
     if args.per_cell < 1:
         raise InputError(f"skdgmpm stability: --per-cell {args.per_cell} must be a positive integer")
@@ -139,17 +139,17 @@ def _stability_of_steps(args):
         if args.method == "rk-dgfem":
             method["integrator"] = args.integrator or ("rk2" if args.order == 1 else "rk4")
         # a step that grows at every CFL: its knee where the table has one, else its bracket is not a limit
-        growth = stability2d.SLOW_GROWTH.get(stability2d.dg_key(args.method, args.order, method.get("integrator"),
-                                                                args.dim), 1e-9)
+        key = stability2d.dg_key(args.method, args.order, method.get("integrator"), args.dim)
+        growth = stability2d.growth(key)
         pair = stability2d.bracket(n, nu=args.nu if args.dim == 2 else 0.0, hi=2.0, method=method, dim=args.dim,
                                    growth=growth)
         report = {"order": args.order, **method, "cfl": pair[0]}
         print(f"order {args.order}{', ' + method['integrator'] if 'integrator' in method else ''}: "
               f"CFL limit {stability2d.shown(pair)} (the method's CFL: dt = CFL h / ((2P + 1) c) for P >= 1)")
-        grows = guards.grows_at_every_cfl(args.method, args.order, method.get("integrator"))
+        grows = stability2d.grows_at_every_cfl(args.method, args.order, method.get("integrator"))
         if grows is not None:
-            print(f"  {'not a limit' if growth == 1e-9 else 'its knee'}: {grows}; below {pair[0]:.3f} each step "
-                  f"grows by at most {growth:g}")
+            what = "its knee" if key in stability2d.SLOW_GROWTH else "not a limit"
+            print(f"  {what}: {grows}; below {pair[0]:.3f} each step grows by at most {growth:g}")
     print("CFL limit: the largest CFL at which no Fourier mode of the step grows (to 0.002, below);")
     print("  skdgmpm run refuses a CFL above it (method.cfl_above_limit = true runs it anyway).")
     if args.json:

@@ -207,7 +207,7 @@ def _dg_limit(disc):
     stable, unstable = pair
     what = f"the {scene.dim}D von Neumann limit {shown(pair)} of {name} P{order}"
     what += f" with {stepper.integrator}" if name == "rk-dgfem" else ""
-    if key in SLOW_GROWTH:                  # a knee: the step grows slowly below it (`grows_at_every_cfl`)
+    if key in SLOW_GROWTH:                  # a knee: the step grows slowly below it
         what += f" (below it a step grows by at most {SLOW_GROWTH[key]:g}, beyond it by far more)"
     if scene.dim == 2:
         what += (f", nu = {_nus_text(nus)} "
@@ -232,23 +232,13 @@ def cfl_limit(disc, cfl):
     return _dg_limit(disc) if name != "dgmpm" else None
 
 
-def grows_at_every_cfl(name, order, integrator):
-    """Why no CFL makes this DG step stable, or None: RK2 with P >= 2 (RK order below P + 1) and
-    ADER with P >= 4 grow slowly at every CFL (`skdgmpm.stability2d`'s analysis; for ADER also
-    an independent ADER-DG, tests/test_stability2d.py)."""
-    if name == "rk-dgfem" and integrator == "rk2" and order >= 2:
-        return (f"rk-dgfem P{order} with rk2 grows at every CFL, slowly (P2: 1 + 5.6e-6 a step at 0.4): a long "
-                f"run grows; with rk4 it does not")
-    if name in ("ader-dgfem", "ader-dgmpm") and order >= 4:
-        return (f"{name} P{order} grows at every CFL, slowly below its knee (1D: 1 + 1.1e-6 a step at 0.3 for P4, "
-                f"1 + 1.3e-5 for P5): a long run grows")
-    return None
-
-
 def check_cfl(disc):
     """Refuse a CFL above the method's known stability limit (`cfl_limit`); with
     ``method.cfl_above_limit = true`` a warning only. Returns the limit, or None where none is
-    known. A DG step that grows at every CFL gets a warning too (`grows_at_every_cfl`)."""
+    known. A DG step that grows at every CFL gets a warning too
+    (`stability2d.grows_at_every_cfl`)."""
+    from .stability2d import grows_at_every_cfl
+
     stepper, scene = disc.stepper, disc.scene
     known = cfl_limit(disc, stepper.cfl)
     if known is not None and stepper.cfl >= known[0]:

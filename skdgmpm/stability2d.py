@@ -31,8 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["bracket", "dg_key", "dg_limit", "dg_limit_1d", "dg_table", "dg_table_1d", "dgmpm", "limit", "shown",
-           "spectral_radius", "step_blocks", "table"]
+__all__ = ["bracket", "dg_key", "dg_limit", "dg_limit_1d", "dg_table", "dg_table_1d", "dgmpm", "grows_at_every_cfl",
+           "growth", "limit", "shown", "spectral_radius", "step_blocks", "table"]
 
 #: The limits `skdgmpm run` checks a 2D DGMPM scene against (`table`, `limit`).
 TABLE = Path(__file__).with_name("stability_2d.json")
@@ -149,12 +149,15 @@ def spectral_radius(blocks, n_theta=None, theta=None):
     return float(np.abs(np.linalg.eigvals(G)).max())
 
 
+STABLE = 1e-9      # the growth a step may show and be called stable: the blocks are exact to rounding
+
+
 def bracket(per_cell=1, integrator="euler", transverse="ctu", nu=0.3, layout="auto", lo=0.2, hi=1.4, tol=2e-3,
-            n_theta=None, method=None, dim=2, growth=1e-9):
+            n_theta=None, method=None, dim=2, growth=STABLE):
     """(lo, hi): the step is stable at CFL ``lo`` and unstable at ``hi`` (``hi - lo <= tol``),
-    by bisection; stable means a spectral radius of at most 1 + ``growth`` (default 1e-9: the
-    blocks are exact to rounding, 1 + 3e-13 where the limit is reached exactly; larger for a step
-    that grows at every CFL, `SLOW_GROWTH`). (0, tol) where nothing is stable."""
+    by bisection; stable means a spectral radius of at most 1 + ``growth`` (default `STABLE`: 1 +
+    3e-13 where the limit is reached exactly; larger for a step that grows at every CFL, `growth`).
+    (0, tol) where nothing is stable."""
     def stable(cfl):
         blocks = step_blocks(per_cell, integrator, transverse, cfl, nu, layout, method, dim)
         return spectral_radius(blocks, n_theta) <= 1 + growth
@@ -174,10 +177,9 @@ def _key(per_cell, integrator, transverse):
 #: The DG methods' rows of the table: ADER-DGMPM's step has ADER-DGFEM's limits where it has P + 1
 #: particles a direction (L23's S1, S2: its reconstruction then interpolates them).
 #: P3's rows take 12 (ADER, reach 1) and 16 minutes (RK4, reach 4) here in 2D, a second in 1D.
-#: Left out in 2D: ADER P >= 4, in 1D only (`DG_ROWS_1D`). RK2 with P >= 2 grows at every CFL, if
-#: slowly (1 + 2.6e-10 a step at 0.15, 1 + 5.6e-6 at 0.4) and with no knee: its limit would be the
-#: tolerance's. ADER with P >= 4 grows at every CFL too (1D: 1 + 1.1e-6 a step at 0.3 for P = 4,
-#: 1 + 1.3e-5 for P = 5; the scheme's own, tests/test_stability2d.py), up to a knee (`SLOW_GROWTH`).
+#: Left out in 2D: ADER P >= 4, in 1D only (`DG_ROWS_1D`), at the knee of its slow growth
+#: (`SLOW_GROWTH`). Left out: RK2 with P >= 2, which grows at every CFL with no knee
+#: (`grows_at_every_cfl`): its limit would be the tolerance's.
 DG_ROWS = {**{f"ader {p}": {"name": "ader-dgfem", "order": p} for p in (1, 2, 3)},
            "rk-dgfem 1 rk2": {"name": "rk-dgfem", "order": 1, "integrator": "rk2"},
            **{f"rk-dgfem {p} rk4": {"name": "rk-dgfem", "order": p, "integrator": "rk4"} for p in (1, 2, 3)}}
@@ -186,6 +188,25 @@ DG_ROWS_1D = {**DG_ROWS, **{f"ader {p}": {"name": "ader-dgfem", "order": p} for 
 #: 4.9e-6 a step at 0.6, 1 + 0.08 at 0.65): their bracket is that knee, the largest CFL at which
 #: no mode grows by more than this much a step.
 SLOW_GROWTH = {"ader 4": 1e-4, "ader 5": 1e-4}
+
+
+def growth(key):
+    """The growth a step may show where the table's row ``key`` is its limit: its knee's
+    (`SLOW_GROWTH`), else `STABLE`."""
+    return SLOW_GROWTH.get(key, STABLE)
+
+
+def grows_at_every_cfl(name, order, integrator):
+    """Why no CFL makes this DG step stable, or None: RK2 with P >= 2 (RK order below P + 1;
+    1 + 2.6e-10 a step at 0.15, 1 + 5.6e-6 at 0.4 for P2) and ADER with P >= 4 (an independent
+    ADER-DG grows alike, tests/test_stability2d.py: the scheme's own) grow slowly at every CFL."""
+    if name == "rk-dgfem" and integrator == "rk2" and order >= 2:
+        return (f"rk-dgfem P{order} with rk2 grows at every CFL, slowly (P2: 1 + 5.6e-6 a step at 0.4): a long "
+                f"run grows; with rk4 it does not")
+    if name in ("ader-dgfem", "ader-dgmpm") and order >= 4:
+        return (f"{name} P{order} grows at every CFL, slowly below its knee (1D: 1 + 1.1e-6 a step at 0.3 for P4, "
+                f"1 + 1.3e-5 for P5): a long run grows")
+    return None
 
 
 def shown(pair):
@@ -216,7 +237,7 @@ def dg_table(rows=tuple(DG_ROWS), nus=NUS, progress=print):
 def dg_table_1d(rows=tuple(DG_ROWS_1D), progress=print):
     """{row: [lo, hi]} of the DG methods' 1D steps (one wave speed: no nu)."""
     return {key: _row(f"{key}, 1D", (0.0,), progress, 1, hi=2.0, method=DG_ROWS_1D[key], dim=1,
-                      growth=SLOW_GROWTH.get(key, 1e-9))[0] for key in rows}
+                      growth=growth(key))[0] for key in rows}
 
 
 def table(per_cells=PER_CELL, nus=NUS, progress=print):
