@@ -34,7 +34,7 @@ from numpy.polynomial import legendre
 from skdgmpm.materials.points import only_law
 
 from . import parallel, system
-from .ader_kernels import interior_flux_sum, traces
+from .ader_kernels import interior_flux_sum
 from .constitutive import law_point
 from .dgfem import DGFEM
 from .equations import add_flux
@@ -299,7 +299,7 @@ class ADERDGFEM(DGFEM):
     picard_tol: float = 1e-12
     picard_max: int = 0                     # 0: `default_picard_max`
     picard_guess: str = "taylor"            # or "constant" (u_hat = U^n at every time node)
-    stages: tuple = ("time_step", "advance", "predictor", "corrector", "surface_integral", "boundary_states",
+    stages: tuple = ("time_step", "advance", "predictor", "corrector", "surface_integral", "boundary_flux",
                      "source", "limit", "evaluate_points", "check")
     picard: PicardStats = field(default_factory=PicardStats, init=False)
 
@@ -334,10 +334,8 @@ class ADERDGFEM(DGFEM):
         `_face_traces` and ``gauss`` (n_gauss, n_points) to the Gauss points, folded into the volume
         term K_alpha = D_alpha^T gauss (F is linear in Q)."""
         self.traces = tuple((T.indptr, T.indices, T.data) for T in traces)
-        b = self.boundary
         mat_L, mat_R, rho_L, rho_R = self.interior_sides[:4]          # DGFEM's, shared
-        self.face_material = (mat_L, mat_R, self.cell_material[b.cell_L])
-        self.face_rho = (rho_L, rho_R, self.rho_cell[b.cell_L])
+        self.face_material, self.face_rho = (mat_L, mat_R), (rho_L, rho_R)
         self.K = system.Stiffness(tuple((D.T @ gauss).tocsr() for D in self.D))
 
     # ---------------------------------------------------------------- predictor
@@ -440,9 +438,9 @@ class ADERDGFEM(DGFEM):
     @stage
     def surface_integral(self, u_hat, q_hat, time, dt, R):
         """-int Phi sum_s w_s F_N*(tau_s) over all faces added to R; returns the boundary work. One
-        compiled pass over the interior faces for every time node (`ader_kernels`), then the
-        boundary conditions per node (they may depend on time)."""
-        d, n_t, nc = self.d, len(self.tau), u_hat.shape[-1]
+        compiled pass over the interior faces for every time node (`ader_kernels`), one over the
+        boundary faces (`boundary_flux`, each node's conditions at its time)."""
+        nc = u_hat.shape[-1]
         f, b = self.interior, self.boundary
         T_L, T_R, T_B = self.traces
         flux = np.empty((len(f), nc))
@@ -453,15 +451,11 @@ class ADERDGFEM(DGFEM):
         f.integrate_jump(flux, R)
         if not len(b):
             return 0.0
-        F, Q = np.empty((n_t, len(b), d * d)), np.empty((n_t, len(b), nc))
-        traces(T_B, u_hat, q_hat, F, Q)
-        flux, work = 0.0, 0.0
-        for s, (tau, w) in enumerate(zip(self.tau, self.w_tau)):
-            C = self.materials.tangent(F[s].reshape(-1, d, d), self.face_material[2])
-            states, power = self.boundary_states(Q[s], C, self.face_rho[2], time + tau * dt)
-            flux = flux + w * states.flux
-            work += w * dt * power
+        flux, powers = self.boundary_flux(T_B, u_hat, q_hat, time + self.tau * dt, self.w_tau)
         b.integrate(flux, "L", R, sign=-1.0)
+        work = 0.0
+        for w, power in zip(self.w_tau, powers):
+            work += w * dt * power
         return work
 
     @stage

@@ -16,7 +16,6 @@ from . import parallel
 from .equations import add_normal_flux, riemann
 from .faces import gather_row as _gather
 from .kernel_cache import kernel_factory, scratch
-from .system import DIMENSION
 
 
 def interior_flux_sum(T_L, T_R, u_hat, q_hat, rho_L, rho_R, N, mat_L, mat_R, laws, params, weights, flux):
@@ -61,30 +60,3 @@ def _interior_flux_sum(d, only):        # literals: the (d, d) loops unrolled, o
                 flux[f, c] = o[c]
         return -1
     return interior_flux_sum
-
-
-def traces(T, u_hat, q_hat, F, Q):
-    """F[s, r] = (T u_hat[s])_F (S, n_rows, d*d) and Q[s, r] = T q_hat[s] (S, n_rows, nc) for the
-    rows r of a trace T at every time node s (the boundary faces, whose conditions are applied in
-    Python per node)."""
-    d = DIMENSION[Q.shape[2]]
-    _traces(d)(T, u_hat, q_hat, F, Q)
-
-
-@kernel_factory
-def _traces(d):
-    def traces(T, u_hat, q_hat, F, Q):
-        nc = d * d + d
-        Fe, q = scratch((3, 3)), scratch((nc,))
-        n_points = u_hat.shape[1]
-        u_flat = u_hat.reshape((-1, nc))
-        q_flat = q_hat.reshape((-1, nc))
-        for s in range(len(Q)):
-            for r in range(Q.shape[1]):
-                _gather(T, r, u_flat, q_flat, q, Fe, d, s * n_points)
-                for c in range(nc):
-                    Q[s, r, c] = q[c]
-                for i in range(d):
-                    for a in range(d):
-                        F[s, r, i * d + a] = Fe[i, a]
-    return traces

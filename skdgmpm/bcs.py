@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from .equations import _solve
+from .equations import _solve, traction
 from .errors import InputError
 from .kernel_cache import kernel_factory, scratch
 
@@ -91,6 +91,25 @@ def star_face(frame, velocity, values, f, t_L, v_L, Z, t_s, v_s, d):
     _solve(A, b, x, 2 * d)
     for i in range(d):
         t_s[i], v_s[i] = x[i], x[d + i]
+
+
+@njit(cache=True, inline="always")
+def ghost_face(ghosts, f, q, n, Z, t_L, v_L, t_s, v_s, d):
+    """Face f's interior traction t_L = P n and velocity v_L (d,) from its state row q = [P, v]
+    (nc,) and its stationary state (t*, v*) into t_s, v_s (d,): the interior's where its condition
+    imposes nothing, else `star_face` (impedance Z (d, d)). ``ghosts`` = (frame (nf, d, d), imposes
+    velocity (nf, d), values at the time (nf, d), copies the interior (nf,)), `BoundaryGhosts`'s.
+    The boundary passes of first-order DGMPM (`dgmpm_kernels.boundary_faces`) and of the DG methods
+    (`riemann.boundary_fluxes`)."""
+    frame, velocity, values, copy = ghosts
+    traction(q, n, t_L, d)
+    for i in range(d):
+        v_L[i] = q[d * d + i]
+    if copy[f]:                     # nothing imposed: the ghost is the interior
+        for i in range(d):
+            t_s[i], v_s[i] = t_L[i], v_L[i]
+    else:
+        star_face(frame, velocity, values, f, t_L, v_L, Z, t_s, v_s, d)
 
 
 @dataclass(frozen=True)

@@ -26,8 +26,8 @@ from .faces import interior_faces
 from .kernel_cache import kernel_factory, scratch
 from .limiter import SlopeLimiter
 from .particles import Particles
-from .riemann import trace_fluxes
-from .scheme import FaceStates, GodunovScheme, GridState, ParticleState, stage
+from .riemann import _not_hyperbolic, boundary_fluxes, trace_fluxes
+from .scheme import GodunovScheme, GridState, ParticleState, boundary_power, stage
 
 INTEGRATORS = ("rk2", "rk4")        # Euler is unstable for DG of degree >= 1
 
@@ -116,8 +116,8 @@ class DGFEM(GodunovScheme):
     order: int = 1
     cfl: float = 0.5
     integrator: str = "rk2"
-    stages: tuple = ("time_step", "advance", "gauss_state", "boundary_flux", "boundary_states", "interface_flux",
-                     "volume_flux", "source", "limit", "evaluate_points", "check")
+    stages: tuple = ("time_step", "advance", "gauss_state", "boundary_flux", "interface_flux", "volume_flux", "source",
+                     "limit", "evaluate_points", "check")
     external_work: float = field(default=0.0, init=False)
     transverse: str = "none"
     limiter: str = "none"
@@ -172,6 +172,8 @@ class DGFEM(GodunovScheme):
         f = self.interior          # each interior row's sides: material, density, the traces as CSR triples
         self.interior_sides = (self.cell_material[f.cell_L], self.cell_material[f.cell_R], rho_cell[f.cell_L],
                                rho_cell[f.cell_R], parallel.csr(f.T_L), parallel.csr(f.T_R))
+        b = self.boundary          # each boundary row's side: material, density, the trace from the dofs
+        self.boundary_side = (self.cell_material[b.cell_L], rho_cell[b.cell_L], parallel.csr(b.T_L))
         self.laws = law_table(self.materials.materials)          # the compiled point laws
         # (P+1)^d Gauss points = (P+1)^d dofs: point values <-> coefficients, cell by cell
         self.point_to_dofs = np.linalg.inv(np.transpose(phi, (1, 2, 0)))                # (nel, nb, nq)
@@ -207,27 +209,43 @@ class DGFEM(GodunovScheme):
 
     history_n = None          # (n_gauss, n_history) internal variables of the step's t_n
 
-    def face_values(self, T, grid_state, cells):
-        """Traces of U, and Q: from the law at the facet points, or, for a law with internal
-        variables (they live at the Gauss points only), the trace of Q interpolated from the
-        Gauss points (``grid_state.Q``, dofs)."""
-        d = self.d
-        U = parallel.matmul(T, grid_state.U)
-        rho = self.rho_cell[cells]          # not a trace: ElementQuadP's basis is no partition of unity
-        Q = self.point_state(U, cells, rho) if grid_state.Q is None else parallel.matmul(T, grid_state.Q)
-        return Q, U[:, : d * d].reshape(-1, d, d), rho
-
     # ---------------------------------------------------------------- stages
     @stage
     def interface_flux(self, grid_state):
-        """(e) Godunov fluxes at the interior facet points: one compiled pass from the dofs
-        (`riemann.trace_fluxes`: traces, law, tangents, Riemann problem), no face array kept; no
-        fluctuations (DGFEM has no transverse correction)."""
+        """(e) Godunov fluxes at the interior facet points (nf, nc): one compiled pass from the dofs
+        (`riemann.trace_fluxes`: traces, law, tangents, Riemann problem), no face array kept."""
         f = self.interior
         mat_L, mat_R, rho_L, rho_R, T_L, T_R = self.interior_sides
-        flux = trace_fluxes(T_L, T_R, grid_state.U, grid_state.Q, rho_L, rho_R, f.normal, mat_L, mat_R, *self.laws,
+        return trace_fluxes(T_L, T_R, grid_state.U, grid_state.Q, rho_L, rho_R, f.normal, mat_L, mat_R, *self.laws,
                             np.empty((len(f), grid_state.U.shape[1])))
-        return FaceStates(flux, None, None, None)
+
+    @stage
+    def boundary_flux(self, T, u, q, times, weights):
+        """(d) The boundary facet points' fluxes under their conditions [R18 §4.5], sum_s weights[s]
+        F_N(t*, v*) (nb, nc), from the states u, q (S, n, nc) at the times ``times`` (S,) through
+        the trace T (`riemann.boundary_fluxes`: one compiled pass, trace, law, tangent, ghost
+        state, flux; q None: the law at the trace of u), and the power through the boundary at each
+        time (W, a list of S)."""
+        b, g = self.boundary, self.ghosts
+        material, rho, _ = self.boundary_side
+        S, nb, d = len(times), len(b), self.d
+        flux, t_s, v_s = np.empty((nb, d * d + d)), np.empty((S, nb, d)), np.empty((S, nb, d))
+        values = np.stack([g.values_at(t) for t in times])
+        bad = boundary_fluxes(T, u, q, rho, b.normal, material, *self.laws, (g.frame, g.velocity, g.copy), values,
+                              np.asarray(weights, dtype=float), flux, t_s, v_s)
+        if bad >= 0:
+            _not_hyperbolic(bad)
+        return flux, [boundary_power(b.measure, t_s[s], v_s[s]) for s in range(S)]
+
+    def surface_residual(self, grid_state, time):
+        """-int Phi F_N* over all faces, and the power through the boundary (W): the interior
+        faces' Godunov fluxes and the boundary's, each one pass from the dofs."""
+        T_B = self.boundary_side[2]
+        Q = None if grid_state.Q is None else grid_state.Q[None]
+        flux_bnd, (power,) = self.boundary_flux(T_B, grid_state.U[None], Q, (time,), (1.0,))
+        R = self.interior.integrate_jump(self.interface_flux(grid_state))      # side R minus side L, one pass
+        self.boundary.integrate(flux_bnd, "L", R, sign=-1.0)
+        return R, power
 
     @stage("volume_flux")
     def volume_flux_points(self, Q):
@@ -246,9 +264,9 @@ class DGFEM(GodunovScheme):
         (the state's, at the first stage)."""
         if self.materials.n_history:     # the law at the Gauss points only, where the history is
             Q = self.gauss_state(U_dofs, U_points)
-            R, power = self.surface_residual(GridState(U_dofs, self.project(Q)), time, dt)
+            R, power = self.surface_residual(GridState(U_dofs, self.project(Q)), time)
         else:
-            R, power = self.surface_residual(GridState(U_dofs, None), time, dt)
+            R, power = self.surface_residual(GridState(U_dofs, None), time)
             Q = self.gauss_state(U_dofs, U_points) if Q_points is None else Q_points
         V = self.volume_flux_points(Q)
         if self.body_force is not None:     # (R + V) + S, in that order

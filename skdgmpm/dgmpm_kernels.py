@@ -39,7 +39,7 @@ from skdgmpm.materials.points import only_law, tangent_call, tangent_point, tang
 from . import parallel
 from .equations import (add_normal_flux, ctu_parts, ctu_parts_opposite, ctu_split, embed, fluctuations, godunov,
                         impedance, traction)
-from .bcs import star_face
+from .bcs import ghost_face
 from .faces import gather_row
 from .health import identity_if_not
 from .kernel_cache import kernel_factory, scratch
@@ -492,7 +492,7 @@ def boundary_faces(T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, c
                    parts):
     """Every boundary face's interior side (traction
     t_L, velocity v_L, impedance Z = sqrt(rho0 A_N), tangent C, density), its stationary state
-    (t*, v*) into t_s, v_s (nf, d) (`bcs.star_face` under the face's condition, ``ghosts`` =
+    (t*, v*) into t_s, v_s (nf, d) (`bcs.ghost_face` under the face's condition, ``ghosts`` =
     (frame (nf, d, d), imposes velocity (nf, d), values at the time (nf, d), copies the interior
     (nf,)), `bcs.BoundaryGhosts`), its flux F_N(t*, v*) into flux (nf, nc) and, with ``ctu``,
     the transverse corrections per unit Delta t of the fluctuation F_N(t*, v*) - F_N(t_L, v_L)
@@ -519,11 +519,10 @@ def _boundary_faces(d, slots, traces, only):   # without traces the trace path i
 
     def boundary_faces(lo, hi, T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, records, flux,
                        t_s, v_s, parts):
-        dd, nc = d * d, d * d + d
+        nc = d * d + d
         q, F, Zi, w = scratch((nc,)), scratch((3, 3)), scratch((d, d)), scratch((nc,))
         t_L, v_L, Z, C = scratch((d,)), scratch((d,)), scratch((d, d)), scratch((d, d, d, d))
         r, n, t_f, v_f, o = scratch((width,)), scratch((d,)), scratch((d,)), scratch((d,)), scratch((nc,))
-        frame, velocity, values, copy = ghosts
         rec, state, local = records
         for f in range(lo, hi):         # rows copied into stack scratch, not viewed (views are reference counted)
             c = cell[f]
@@ -545,14 +544,7 @@ def _boundary_faces(d, slots, traces, only):   # without traces the trace path i
                     tangent_point(laws, params, m, only, F, C, d)
                 if not impedance(C, n, rho_f, Z, Zi, d):
                     return f - lo
-            traction(q, n, t_L, d)
-            for i in range(d):
-                v_L[i] = q[dd + i]
-            if copy[f]:                     # nothing imposed: the ghost is the interior
-                for i in range(d):
-                    t_f[i], v_f[i] = t_L[i], v_L[i]
-            else:
-                star_face(frame, velocity, values, f, t_L, v_L, Z, t_f, v_f, d)
+            ghost_face(ghosts, f, q, n, Z, t_L, v_L, t_f, v_f, d)
             for k in range(nc):
                 o[k] = 0.0
             add_normal_flux(t_f, v_f, n, 1.0, o, d)

@@ -1,16 +1,18 @@
 """The linearised Riemann solver batched over a set of faces [R18 §4], [L23 eq 35-37]: traction
 and velocity (nf, d), impedances (nf, d, d), tangents C (nf, d, d, d, d), states Q = [P, v]
 (nf, d*d + d). Each function is one compiled loop over the faces calling the point functions of
-`skdgmpm.equations` (where the formulas are written), for the schemes that treat a face set at a
-time (boundary conditions); DGFEM's interior faces (`trace_fluxes`) and the fused DGMPM and ADER
-face passes call the same point functions from the traces, without face arrays.
+`skdgmpm.equations` (where the formulas are written) and `skdgmpm.bcs` (the ghost states). The
+batched ones (`godunov_fluxes`, `impedance`, `normal_flux`) take face arrays, for the tests'
+references; DGFEM's faces (`trace_fluxes`, `boundary_fluxes`, also ADER's boundary) and the fused
+DGMPM and ADER face passes call the same point functions from the traces, without face arrays.
 """
 import numpy as np
 from numba import njit
 
-from skdgmpm.materials.points import only_law, stress_points, tangent_call, tangent_points
+from skdgmpm.materials.points import only_law, stress_point, stress_points, tangent_call, tangent_point, tangent_points
 
 from . import parallel
+from .bcs import ghost_face
 from .equations import (add_normal_flux, ctu_split, flux_state, fluctuations, godunov, impedance as _impedance,
                         riemann)
 from .errors import InstabilityError
@@ -107,6 +109,48 @@ def _trace_fluxes(d, traced, only):    # traced: 1 if Q is traced (a law with hi
                 flux[f, k] = o[k]
         return -1
     return trace_fluxes
+
+
+@kernel_factory
+def _boundary_fluxes(d, traced, only):  # traced: 1 if q is given (ADER's predictor, a law with history), 0: the law
+    nc = d * d + d
+
+    def boundary_fluxes(lo, hi, T, u, q, rho, N, material, laws, params, ghosts, values, weights, flux, t_s, v_s):
+        """Node by node (the imposed values of node s, a view taken once a chunk), each row's
+        side formed in stack scratch as `trace_fluxes` forms it."""
+        frame, velocity, copy = ghosts
+        q_f, o, F, P = scratch((nc,)), scratch((nc,)), scratch((3, 3)), scratch((d, d))
+        C, Z, Zi = scratch((d, d, d, d)), scratch((d, d)), scratch((d, d))
+        t_L, v_L, t_f, v_f, n = scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,)), scratch((d,))
+        n_points = u.shape[1]
+        u_flat = u.reshape((-1, nc))
+        q_flat = q.reshape((-1, nc))
+        for s in range(len(weights)):
+            rule = (frame, velocity, values[s], copy)
+            for f in range(lo, hi):
+                for i in range(d):
+                    n[i] = N[f, i]
+                gather_row(T, f, u_flat, q_flat, q_f, F, d, s * n_points)
+                m = material[f]
+                if not traced:          # q_f holds the trace of U: [F, p] -> [P(F), p / rho0]
+                    stress_point(laws, params, m, only, F, P, d)
+                    flux_state(P, q_f, rho[f], q_f, d)
+                if d == 1:              # the law called, not inlined (`points.tangent_call`)
+                    tangent_call(laws, params, m, only, F, C, d)
+                else:
+                    tangent_point(laws, params, m, only, F, C, d)
+                if not _impedance(C, n, rho[f], Z, Zi, d):
+                    return f - lo
+                ghost_face(rule, f, q_f, n, Z, t_L, v_L, t_f, v_f, d)
+                for k in range(nc):     # sum_s weights[s] F_N, summed from 0 in node order
+                    o[k] = 0.0 if s == 0 else flux[f, k]
+                add_normal_flux(t_f, v_f, n, weights[s], o, d)
+                for k in range(nc):
+                    flux[f, k] = o[k]
+                for i in range(d):
+                    t_s[s, f, i], v_s[s, f, i] = t_f[i], v_f[i]
+        return -1
+    return boundary_fluxes
 
 
 @kernel_factory
@@ -210,6 +254,24 @@ def trace_fluxes(T_L, T_R, U, Q, rho_L, rho_R, N, mat_L, mat_R, laws, params, fl
     if bad >= 0:
         _not_hyperbolic(bad)
     return flux
+
+
+def boundary_fluxes(T, u, q, rho, N, material, laws, params, ghosts, values, weights, flux, t_s, v_s):
+    """The Godunov fluxes of the boundary face rows under their conditions, summed over time nodes:
+    flux[f] = sum_s weights[s] F_N(t*, v*) (nf, nc), the stationary states of every node into t_s,
+    v_s (S, nf, d). Row f's interior side at node s is the trace T (CSR triple (nf, n_points)) of
+    the node's states u (S, n_points, nc) with the law (``material`` (nf,) into the table laws,
+    params; densities rho (nf,)) at the trace of F, or, with ``q`` (S, n_points, nc) given, the trace
+    of q (ADER's predictor; a law with history); the tangent at the trace of F; then the face's
+    ghost state (`bcs.ghost_face`; ``ghosts`` = `BoundaryGhosts`'s (frame, imposes velocity,
+    copies the interior), ``values`` (S, nf, d) the imposed values at each node's time). One
+    compiled pass on the threads, each row written by one chunk: the same bits for any thread
+    count. Returns the first row whose acoustic tensor is not positive definite, or -1."""
+    kernel = _boundary_fluxes(N.shape[1], int(q is not None), only_law(laws))
+    q = u if q is None else q
+    return parallel.chunked(len(N), kernel, "lh" + "w" * 14, (T, u, q, rho, N, material, laws, params, ghosts, values,
+                                                             weights, flux, t_s, v_s), "first",
+                            max(1, parallel.MIN_ROWS // 8))
 
 
 def transverse_positive(w_F, w_p, C, n, rho0):

@@ -1,10 +1,10 @@
-"""What every Godunov-type scheme of skdgmpm shares: states, face fluxes with boundary
+"""What every Godunov-type scheme of skdgmpm shares: states, the boundary faces and their
 conditions, stability checks, energy and the CFL-guarded step.
 
-A scheme provides ``face_values`` (the states on each side of a face set), its volume term and
-its time integration; the surface term -int Phi F_N* with the Riemann solver and the boundary
-conditions is the same for first-order DGMPM (one point per face) and DGFEM (facet Gauss
-points).
+A scheme provides its face passes, its volume term and its time integration; every face pass
+calls the same point functions (`skdgmpm.equations`: the Riemann solver, `skdgmpm.bcs`: the
+ghost states), from the cells' records (first-order DGMPM) or the traces at the facet points
+(DGFEM, ADER).
 """
 import functools
 import operator
@@ -18,7 +18,6 @@ from .bcs import FREE, BoundaryGhosts
 from .errors import InputError, InstabilityError
 from .faces import boundary_faces
 from .health import assess, with_momenta
-from .riemann import godunov_fluxes, impedance, normal_flux
 
 
 @dataclass
@@ -49,20 +48,6 @@ class GridState:
 
     U: np.ndarray
     Q: np.ndarray
-
-
-@dataclass
-class FaceStates:
-    """Godunov flux on a face set and what the CTU splitting needs: the fluctuations entering
-    each side and the sides' linearisations (side R is None on boundary faces)."""
-
-    flux: np.ndarray                 # F_N* (nf, ncomp)
-    fluct_L: np.ndarray              # A- dU entering side L (nf, ncomp)
-    C_L: np.ndarray                  # tangent (nf, d, d, d, d)
-    rho_L: np.ndarray                # (nf,)
-    fluct_R: np.ndarray = None       # A+ dU entering side R
-    C_R: np.ndarray = None
-    rho_R: np.ndarray = None
 
 
 def cell_values(name, cells, values, n_cells):
@@ -129,7 +114,7 @@ def predicted_growth(growths):
 class GodunovScheme:
     """Base of the steppers: needs ``d``, ``materials``, ``bcs``, ``cell_material``,
     ``particles`` (the points carrying the state), ``interior``, ``n_dofs``, ``cfl`` and
-    ``h_min``, and implements ``face_values``."""
+    ``h_min``."""
 
     face_options = {}
     external_work = 0.0
@@ -178,66 +163,6 @@ class GodunovScheme:
         self.bc_groups = [(self.boundary_bc == k, conditions[k + 1]) for k in range(-1, len(self.bcs))]
         self.bc_groups = [(sel, bc) for sel, bc in self.bc_groups if sel.any()]
         self.ghosts = BoundaryGhosts(self.bc_groups, self.boundary.normal)
-
-    def face_values(self, T, grid_state, cells):
-        """(Q, F, rho0) on one side of a face set: ((nf, ncomp), (nf, d, d), (nf,))."""
-        raise NotImplementedError
-
-    def face_operator(self, faces, side):
-        """Operator from the state's unknowns to the face rows (the DG trace by default)."""
-        return faces.T_L if side == "L" else faces.T_R
-
-    def _side(self, faces, side, grid_state, cells):
-        """Q (nf, ncomp), tangent C (nf, d, d, d, d) and density (nf,) on one side of a face set."""
-        Qf, Ff, rho = self.face_values(self.face_operator(faces, side), grid_state, cells)
-        return Qf, self.materials.tangent(Ff, self.cell_material[cells]), rho
-
-    @stage
-    def boundary_flux(self, grid_state, time):
-        """(d) ghost states -> boundary stationary states and fluxes; returns states and power."""
-        b = self.boundary
-        return self.boundary_states(*self._side(b, "L", grid_state, b.cell_L), time)
-
-    @stage
-    def boundary_states(self, Q_L, C, rho, time):
-        """Boundary stationary states and fluxes from the inner traces Q_L (nf, ncomp), tangents C
-        and densities on the boundary faces; returns states and power."""
-        b = self.boundary
-        P, v_L = system.split(Q_L, self.d)
-        t_L = np.einsum("fia,fa->fi", P, b.normal)
-        Z = impedance(C, b.normal, rho)
-        t_s, v_s = self.ghosts.star(time, t_L, v_L, Z)
-        flux = normal_flux(t_s, v_s, b.normal)
-        fs = FaceStates(flux, flux - normal_flux(t_L, v_L, b.normal), C, rho)
-        return fs, boundary_power(b.measure, t_s, v_s)
-
-    @stage
-    def interface_flux(self, grid_state):
-        """(e) Godunov fluxes at interior faces from the linearised Riemann solver."""
-        f = self.interior
-        Q_L, C_L, rho_L = self._side(f, "L", grid_state, f.cell_L)
-        Q_R, C_R, rho_R = self._side(f, "R", grid_state, f.cell_R)
-        flux, fluct_L, fluct_R = godunov_fluxes(Q_L, C_L, rho_L, Q_R, C_R, rho_R, f.normal)
-        return FaceStates(flux, fluct_L, C_L, rho_L, fluct_R, C_R, rho_R)
-
-    def transverse_flux(self, interior, boundary, dt):
-        """Corrections of the interior and boundary fluxes (none by default)."""
-        return 0.0, 0.0
-
-    def surface_residual(self, grid_state, time, dt):
-        """-int Phi F_N* over all faces; also returns the power through the boundary (W)."""
-        boundary, power = self.boundary_flux(grid_state, time)
-        interior = self.interface_flux(grid_state)
-        corr_int, corr_bnd = self.transverse_flux(interior, boundary, dt)
-        no_corrections = np.isscalar(corr_int) and corr_int == 0 and np.isscalar(corr_bnd) and corr_bnd == 0
-        flux, flux_bnd = (interior.flux, boundary.flux) if no_corrections else (interior.flux + corr_int,
-                                                                                boundary.flux + corr_bnd)
-        R = self.interior.integrate_jump(flux)           # side R minus side L, one pass
-        self.boundary.integrate(flux_bnd, "L", R, sign=-1.0)
-        if getattr(self, "ctu", None) is not None:                   # work of the corrected boundary flux
-            F, p = system.split(flux_bnd, self.d)                    # F* = -v N, p* = -t
-            power = boundary_power(self.boundary.measure, -p, -np.einsum("fia,fa->fi", F, self.boundary.normal))
-        return R, power
 
     @stage
     def time_step(self, state, dt_max=np.inf):
