@@ -139,7 +139,7 @@ def _stability_of_steps(args):
         if args.method == "rk-dgfem":
             method["integrator"] = args.integrator or ("rk2" if args.order == 1 else "rk4")
         # a step that grows at every CFL: its knee where the table has one, else its bracket is not a limit
-        key = stability2d.dg_key(args.method, args.order, method.get("integrator"), args.dim)
+        key = stability2d.dg_key(args.method, args.order, method.get("integrator"))
         growth = stability2d.growth(key)
         pair = stability2d.bracket(n, nu=args.nu if args.dim == 2 else 0.0, hi=2.0, method=method, dim=args.dim,
                                    growth=growth)

@@ -195,7 +195,7 @@ def _dg_limit(disc):
 
     stepper, scene = disc.stepper, disc.scene
     name, order = scene.data["method"].get("name", "dgmpm"), stepper.order
-    key = dg_key(name, order, stepper.integrator, scene.dim)
+    key = dg_key(name, order, stepper.integrator)
     if name == "ader-dgmpm" and (scene.get("particles.file") or compile_helper.per_axis(scene) != order + 1):
         key = None
     if key is None:
@@ -256,29 +256,9 @@ def check_cfl(disc):
 def default_cfl(disc):
     """(CFL, why) of a scene that gives no ``method.cfl``: 1, why None; or, where the method's
     known limit (`cfl_limit`) is below 1, `DEFAULT_SHARE` of it rounded down to 0.01, why the
-    text that says so. A 2D DG step the table lacks (ADER P4, P5) takes half its 1D limit in place
-    of the 2D one (`_half_the_1d_limit`)."""
-    known = cfl_limit(disc, 1.0) or _half_the_1d_limit(disc)
+    text that says so."""
+    known = cfl_limit(disc, 1.0)
     if known is None or 1.0 < known[0]:
         return 1.0, None
     _, limit, what = known
     return math.floor(100 * DEFAULT_SHARE * limit) / 100, f"{DEFAULT_SHARE:g} of {what}"
-
-
-def _half_the_1d_limit(disc):
-    """(refused from, half the 1D limit, what it is) of a 2D DG step whose 2D limit the table
-    lacks but whose 1D limit it holds, or None: every 2D DG limit it holds is 0.498-0.65 of the
-    1D one over nu in [0, 0.49] (the lowest at 0.49), so half the 1D limit is a guess on the
-    stable side, for a default only (the check refuses nothing on it)."""
-    from .stability2d import dg_key, dg_limit_1d
-
-    scene, stepper = disc.scene, disc.stepper
-    name = scene.data["method"].get("name", "dgmpm")
-    if scene.dim != 2 or name not in ("ader-dgfem", "rk-dgfem"):
-        return None
-    key = dg_key(name, stepper.order, stepper.integrator, dim=1)
-    pair = None if key is None else dg_limit_1d(key)
-    if pair is None:
-        return None
-    return pair[1] / 2, pair[0] / 2, (f"half the 1D von Neumann limit {pair[0]:.3f} of {name} P{stepper.order} "
-                                      f"(no 2D limit tabulated; each tabulated 2D one is 0.498-0.65 of its 1D one)")

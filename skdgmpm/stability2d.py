@@ -135,18 +135,32 @@ def step_blocks(per_cell=1, integrator="euler", transverse="ctu", cfl=1.0, nu=0.
     return {r: B for r, B in blocks.items() if max(map(abs, r)) < ring}
 
 
-def spectral_radius(blocks, n_theta=None, theta=None):
+def spectral_radius(blocks, n_theta=None, theta=None, above=None):
     """Largest ``|eigenvalue|`` of ``G(theta)`` over an ``n_theta x n_theta`` grid of wave
     numbers (default 32; in 1D ``n_theta``, default 256), or over the wave numbers ``theta``
-    (k, dim) given."""
+    (k, dim) given. The blocks are real, so ``G(-theta)`` is the conjugate of ``G(theta)``, with
+    the conjugate eigenvalues: of each pair +-theta of the grid (which holds both, modulo 2 pi)
+    one is read, in the grid's order (from theta = -pi). With ``above``: the largest so far as
+    soon as a batch of wave numbers (`THETA_BATCH`) exceeds it, the rest unread (a bisection's
+    unstable step)."""
     dim = len(next(iter(blocks)))
     n_theta = n_theta or (256 if dim == 1 else 32)
     if theta is None:
-        grid = np.linspace(-np.pi, np.pi, n_theta, endpoint=False)
-        theta = np.stack([g.ravel() for g in np.meshgrid(*[grid] * dim, indexing="ij")], axis=1)
+        k = np.stack([g.ravel() for g in np.meshgrid(*[np.arange(n_theta)] * dim, indexing="ij")], axis=1)
+        flat, negated = (np.ravel_multi_index(tuple(i.T), (n_theta,) * dim) for i in (k, (n_theta - k) % n_theta))
+        theta = -np.pi + 2 * np.pi / n_theta * k[flat <= negated]
     theta = np.asarray(theta, dtype=float).reshape(-1, dim)
-    G = sum(B[None] * np.exp(-1j * (theta @ np.asarray(r, dtype=float)))[:, None, None] for r, B in blocks.items())
-    return float(np.abs(np.linalg.eigvals(G)).max())
+    largest = 0.0
+    for start in range(0, len(theta), THETA_BATCH):
+        part = theta[start:start + THETA_BATCH]
+        G = sum(B[None] * np.exp(-1j * (part @ np.asarray(r, dtype=float)))[:, None, None] for r, B in blocks.items())
+        largest = max(largest, float(np.abs(np.linalg.eigvals(G)).max()))
+        if above is not None and largest > above:
+            break
+    return largest
+
+
+THETA_BATCH = 32       # wave numbers a batch of `spectral_radius` (its G stacked: 32 x 216 x 216 complex at ADER P5)
 
 
 STABLE = 1e-9      # the growth a step may show and be called stable: the blocks are exact to rounding
@@ -160,7 +174,7 @@ def bracket(per_cell=1, integrator="euler", transverse="ctu", nu=0.3, layout="au
     (0, tol) where nothing is stable."""
     def stable(cfl):
         blocks = step_blocks(per_cell, integrator, transverse, cfl, nu, layout, method, dim)
-        return spectral_radius(blocks, n_theta) <= 1 + growth
+        return spectral_radius(blocks, n_theta, above=1 + growth) <= 1 + growth
 
     if not stable(lo):                  # below the first guess: bisect from 0 (not a CFL it steps)
         lo, hi = 0.0, lo
@@ -175,15 +189,15 @@ def _key(per_cell, integrator, transverse):
 
 
 #: The DG methods' rows of the table: ADER-DGMPM's step has ADER-DGFEM's limits where it has P + 1
-#: particles a direction (L23's S1, S2: its reconstruction then interpolates them).
-#: P3's rows take 12 (ADER, reach 1) and 16 minutes (RK4, reach 4) here in 2D, a second in 1D.
-#: Left out in 2D: ADER P >= 4, in 1D only (`DG_ROWS_1D`), at the knee of its slow growth
-#: (`SLOW_GROWTH`). Left out: RK2 with P >= 2, which grows at every CFL with no knee
-#: (`grows_at_every_cfl`): its limit would be the tolerance's.
-DG_ROWS = {**{f"ader {p}": {"name": "ader-dgfem", "order": p} for p in (1, 2, 3)},
+#: particles a direction (L23's S1, S2: its reconstruction then interpolates them). ADER P >= 4
+#: at the knee of its slow growth (`SLOW_GROWTH`). In 2D P3's rows take 12 (ADER, reach 1) and 16
+#: minutes (RK4, reach 4) here, ADER P4's 5 and P5's 18 (half the wave numbers read, an unstable
+#: bisection step stopped at its first batch above: `spectral_radius`); in 1D a row takes a second.
+#: Left out: RK2 with P >= 2, which grows at every CFL with no knee (`grows_at_every_cfl`): its
+#: limit would be the tolerance's.
+DG_ROWS = {**{f"ader {p}": {"name": "ader-dgfem", "order": p} for p in (1, 2, 3, 4, 5)},
            "rk-dgfem 1 rk2": {"name": "rk-dgfem", "order": 1, "integrator": "rk2"},
            **{f"rk-dgfem {p} rk4": {"name": "rk-dgfem", "order": p, "integrator": "rk4"} for p in (1, 2, 3)}}
-DG_ROWS_1D = {**DG_ROWS, **{f"ader {p}": {"name": "ader-dgfem", "order": p} for p in (4, 5)}}
 #: Rows whose step grows at every CFL, slowly up to a knee and fast beyond it (1D ADER P4: 1 +
 #: 4.9e-6 a step at 0.6, 1 + 0.08 at 0.65): their bracket is that knee, the largest CFL at which
 #: no mode grows by more than this much a step.
@@ -216,10 +230,10 @@ def shown(pair):
     return "1.0" if stable <= 1.0 <= unstable else f"{stable:.3f}"
 
 
-def dg_key(name, order, integrator=None, dim=2):
-    """The table's row of a DG method in ``dim`` dimensions (None where it has none)."""
+def dg_key(name, order, integrator=None):
+    """The table's row of a DG method, in 1D and 2D alike (None where it has none)."""
     key = f"ader {order}" if name in ("ader-dgfem", "ader-dgmpm") else f"rk-dgfem {order} {integrator}"
-    return key if key in (DG_ROWS if dim == 2 else DG_ROWS_1D) else None
+    return key if key in DG_ROWS else None
 
 
 def _row(key, nus, progress, *args, **keys):
@@ -231,12 +245,12 @@ def _row(key, nus, progress, *args, **keys):
 
 def dg_table(rows=tuple(DG_ROWS), nus=NUS, progress=print):
     """{row: [[lo, hi] per nu]} of the DG methods (`DG_ROWS`)."""
-    return {key: _row(key, nus, progress, 1, method=DG_ROWS[key]) for key in rows}
+    return {key: _row(key, nus, progress, 1, method=DG_ROWS[key], growth=growth(key)) for key in rows}
 
 
-def dg_table_1d(rows=tuple(DG_ROWS_1D), progress=print):
+def dg_table_1d(rows=tuple(DG_ROWS), progress=print):
     """{row: [lo, hi]} of the DG methods' 1D steps (one wave speed: no nu)."""
-    return {key: _row(f"{key}, 1D", (0.0,), progress, 1, hi=2.0, method=DG_ROWS_1D[key], dim=1,
+    return {key: _row(f"{key}, 1D", (0.0,), progress, 1, hi=2.0, method=DG_ROWS[key], dim=1,
                       growth=growth(key))[0] for key in rows}
 
 
@@ -291,11 +305,15 @@ def main(argv=None):
                                      description="Write the CFL limits that skdgmpm run checks.")
     parser.add_argument("--out", type=Path, default=TABLE, help=f"JSON file (default {TABLE})")
     parser.add_argument("--only", choices=PARTS, help="recompute one part, keep the others from --out")
+    parser.add_argument("--rows", nargs="+", metavar="ROW",
+                        help="with --only dg or dg_1d: recompute these rows (e.g. 'ader 4'), keep the others")
     args = parser.parse_args(argv)
+    if args.rows and (args.only not in ROWS or not set(args.rows) <= set(DG_ROWS)):
+        parser.error(f"--rows {' '.join(args.rows)}: rows of --only dg or dg_1d, one of: {', '.join(DG_ROWS)}")
     data = json.loads(args.out.read_text(encoding="utf-8")) if args.only else {}
     for part, compute in PARTS.items():
         if args.only in (None, part):
-            data.update(compute())
+            data.update({part: {**data[part], **ROWS[part](args.rows)}} if args.rows else compute())
     args.out.write_text(json.dumps(data, indent=1) + "\n", encoding="utf-8")
     print(f"wrote {args.out}")
     return 0
@@ -303,6 +321,7 @@ def main(argv=None):
 
 #: The table's parts and what computes each (`main`).
 PARTS = {"dgmpm": lambda: table(), "dg": lambda: {"dg": dg_table()}, "dg_1d": lambda: {"dg_1d": dg_table_1d()}}
+ROWS = {"dg": lambda rows: dg_table(rows), "dg_1d": lambda rows: dg_table_1d(rows)}
 
 
 if __name__ == "__main__":
