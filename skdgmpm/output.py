@@ -11,15 +11,18 @@ from . import system
 from .errors import InputError
 
 
-def particle_fields(stepper, state, rows=None):
+def particle_fields(stepper, state, rows=None, names=None):
     """Named particle arrays at a state: F_ij, P_ij, v_i, sigma_ij (Cauchy, 3x3), x_i and the
     laws' internal variables by name (``eqp``, the equivalent plastic strain, ...); of the
-    particles ``rows`` only, if given (the probes')."""
+    particles ``rows`` only, if given (the probes'). With ``names``, the Cauchy stress only if a
+    sigma_ij is among them (it calls the law: a run's errors against an exact solution without
+    one neither compute it nor compile its kernels after the last step)."""
     d, sel = stepper.d, slice(None) if rows is None else rows
     F, p = system.split(state.U[sel], d)
     P, v = system.split(state.Q[sel], d)
     history = None if state.history is None else state.history[sel]
-    sigma = stepper.materials.cauchy(F, stepper.particles.material[sel], history)
+    stress = names is None or any(name.startswith("sigma") for name in names)
+    sigma = stepper.materials.cauchy(F, stepper.particles.material[sel], history) if stress else None
     out = _history_fields(stepper.materials, history)
     for i in range(d):
         out[f"v{i + 1}"] = v[:, i]
@@ -28,7 +31,7 @@ def particle_fields(stepper, state, rows=None):
             out[f"F{i + 1}{a + 1}"] = F[:, i, a]
             out[f"eps{i + 1}{a + 1}"] = 0.5 * (F[:, i, a] + F[:, a, i]) - (i == a)
             out[f"P{i + 1}{a + 1}"] = P[:, i, a]
-    for i in range(3):
+    for i in range(3 if stress else 0):
         for j in range(i, 3):
             out[f"sigma{i + 1}{j + 1}"] = sigma[:, i, j]
     return out

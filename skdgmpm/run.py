@@ -120,8 +120,8 @@ class Result:
 def compute_errors(disc, state, solution):
     if solution is None:
         return {}
-    fields = output.particle_fields(disc.stepper, state)
     exact = solution.fields(disc.particles.X, state.t)
+    fields = output.particle_fields(disc.stepper, state, names=tuple(exact))
     return relative_errors(fields, exact, disc.particles.volume)
 
 

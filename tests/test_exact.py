@@ -429,3 +429,28 @@ def test_run_errors_say_relative_to_what():
     r = run("plane_wave_svk_2d", ["run.t_end=1e-4"], progress=False)
     assert r.errors["P11"]["relative_to"] == "P11" and r.errors["P22"]["relative_to"] == "P11"
     assert r.errors["v1"]["relative_to"] == "v1"
+
+
+def test_a_runs_errors_read_only_the_exact_solutions_fields(monkeypatch):
+    """`run.compute_errors` takes the particles' fields that the exact solution has: the same norms
+    as from every field, without calling the law's Cauchy stress (which compiled a kernel after a
+    run's last step where no output folder had written a frame: 0.2 s for the bar's `_cofactor`,
+    0.7 s for J2's `_stress_updates`, bench/late_compiles.py)."""
+    from skdgmpm import output
+    from skdgmpm.build import build
+    from skdgmpm.exact import relative_errors
+    from skdgmpm.run import compute_errors
+    from skdgmpm.scene import exact_solution, load_scene
+
+    disc = build(load_scene("bar_elastoplastic_1d", ["grid.cells=20"]))
+    state = disc.stepper.step(disc.stepper.step(disc.initial))
+    solution = exact_solution(disc.scene)
+    every = output.particle_fields(disc.stepper, state)
+    expected = relative_errors(every, solution.fields(disc.particles.X, state.t), disc.particles.volume)
+    assert "sigma11" in every and not any(k.startswith("sigma") for k in expected)
+
+    def refused(*args):
+        raise AssertionError("the Cauchy stress was computed")
+
+    monkeypatch.setattr(type(disc.stepper.materials), "cauchy", refused)
+    assert compute_errors(disc, state, solution) == expected
