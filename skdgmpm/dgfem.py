@@ -257,7 +257,7 @@ class DGFEM(GodunovScheme):
         each dof summing its own points (`parallel.matmul` on B^T)."""
         return parallel.matmul(self.B_T, S, scale=self.gauss.volume)
 
-    def rate_update(self, U_dofs, base, step, time, U_points=None, Q_points=None):
+    def rate_update(self, U_dofs, base, step, time, dt, U_points=None, Q_points=None):
         """base + step dU/dt, dU/dt = M^-1 (surface + volume terms + source), and the boundary
         power: the terms' sum, M^-1 and the update in one pass over the cells (`mass_update`).
         U_points, Q_points: U_dofs's values at the Gauss points and the law there, where known
@@ -290,7 +290,7 @@ class DGFEM(GodunovScheme):
         state: no product with B, no law's pass."""
         def rk_stage(U_eval, base, t, step):
             at = (U_points, Q_points) if U_eval is U else (None, None)
-            U_next, power = self.rate_update(U_eval, base, step, t, *at)
+            U_next, power = self.rate_update(U_eval, base, step, t, dt, *at)
             return self.limit(U_next), power
 
         return integrators.INTEGRATORS[self.integrator](rk_stage, U, time, dt)
