@@ -26,8 +26,8 @@ guards stop it earlier (exit 3, like the other health stops), or refuse it befor
   scene sets ``method.cfl_above_limit = true``; a scene without ``method.cfl`` takes one below the
   limit (`default_cfl`). Known limits: first-order DGMPM, the von Neumann limit of
   its step (in 2D `skdgmpm.stability2d`'s table for regular layouts, else the layout's 1D limit,
-  R18 §6, `skdgmpm.stability`); ADER and RK-DGFEM P = 1-3 (RK2: P = 1; in 1D also ADER 4, 5 at
-  the knee of their slow growth), that of their 1D or 2D step (the same table); MPM,
+  R18 §6, `skdgmpm.stability`); ADER P = 1-5 (P = 4, 5 at the knee of their slow growth) and
+  RK-DGFEM P = 1-3 (RK2: P = 1), that of their 1D or 2D step (the same table); MPM,
   1 (dt = h / (c + |v|)). The DGFEM and ADER steps are already scaled by 1 / (2P + 1), and the
   scene admits CFL <= 2 for them.
 """

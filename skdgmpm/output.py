@@ -31,9 +31,10 @@ def particle_fields(stepper, state, rows=None, names=None):
             out[f"F{i + 1}{a + 1}"] = F[:, i, a]
             out[f"eps{i + 1}{a + 1}"] = 0.5 * (F[:, i, a] + F[:, a, i]) - (i == a)
             out[f"P{i + 1}{a + 1}"] = P[:, i, a]
-    for i in range(3 if stress else 0):
-        for j in range(i, 3):
-            out[f"sigma{i + 1}{j + 1}"] = sigma[:, i, j]
+    if stress:
+        for i in range(3):
+            for j in range(i, 3):
+                out[f"sigma{i + 1}{j + 1}"] = sigma[:, i, j]
     return out
 
 

@@ -321,7 +321,7 @@ def main(argv=None):
 
 #: The table's parts and what computes each (`main`).
 PARTS = {"dgmpm": lambda: table(), "dg": lambda: {"dg": dg_table()}, "dg_1d": lambda: {"dg_1d": dg_table_1d()}}
-ROWS = {"dg": lambda rows: dg_table(rows), "dg_1d": lambda rows: dg_table_1d(rows)}
+ROWS = {"dg": dg_table, "dg_1d": dg_table_1d}       # the DG parts, row by row (`main`'s --rows)
 
 
 if __name__ == "__main__":
