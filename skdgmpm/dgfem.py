@@ -23,6 +23,7 @@ from . import forms, integrators, parallel, system
 from .elements import ElementLineLagrange
 from .errors import InputError
 from .faces import interior_faces
+from .integrators import base_entry, base_parts
 from .kernel_cache import kernel_factory, scratch
 from .limiter import SlopeLimiter
 from .particles import Particles
@@ -35,31 +36,34 @@ INTEGRATORS = ("rk2", "rk4")        # Euler is unstable for DG of degree >= 1
 def _apply_blocks(blocks, cell_dofs, R, out, R2=None, base=None, step=1.0):
     """out[dofs of c] = blocks[c] @ R[dofs of c] for every cell c: blocks (nel, nb, nb), cell_dofs
     (nel, nb), R and out (n_dofs, nc) (a compiled loop: numpy's batched matmul on a gathered copy
-    cost ~4 ms a call at 128^2). With ``R2``, R + R2 in place of R, and with ``base``, base + step
-    * (...): an explicit stage's sum and update in the same pass, entry by entry the operations of
-    numpy's ``base + step * (blocks @ (R + R2))``."""
+    cost ~4 ms a call at 128^2). With ``R2``, R + R2 in place of R, and with ``base`` (an array
+    or an integrator's `Combination`, formed here entry by entry), base + step * (...): an explicit
+    stage's sum and update in the same pass, entry by entry the operations of numpy's ``base +
+    step * (blocks @ (R + R2))``."""
     nb, nc = blocks.shape[1], R.shape[1]
     literal = nc == 6 and nb in (4, 9)      # Q1, Q2 in 2D: literal sizes, the loops unrolled
     kernel = _apply_blocks_kernel(nb if literal else None, nc if literal else None, int(R2 is not None),
                                   int(base is not None))
-    R2, base = (R if R2 is None else R2), (R if base is None else base)
-    parallel.chunked(len(blocks), kernel, "rrwwwww", (blocks, cell_dofs, R, R2, base, float(step), out))
+    R2 = R if R2 is None else R2
+    kind, bases = base_parts(R if base is None else base)
+    parallel.chunked(len(blocks), kernel, "rrwww(wwww)ww", (blocks, cell_dofs, R, R2, kind, bases, float(step), out))
 
 
 @kernel_factory
 def _apply_blocks_kernel(nb, nc, two, update):      # two, update: 0 or 1 (R2 added, base + step * ...)
     if nb is None:                      # sizes read at run time (1D; P >= 3, whose rows outgrow the stack scratch)
-        def apply_blocks(blocks, cell_dofs, R, R2, base, step, out):
+        def apply_blocks(blocks, cell_dofs, R, R2, kind, bases, step, out):
             x = np.empty((blocks.shape[1], R.shape[1]))
-            _apply_blocks_n(blocks, cell_dofs, R, R2, base, step, out, x, blocks.shape[1], R.shape[1], two, update)
+            _apply_blocks_n(blocks, cell_dofs, R, R2, kind, bases, step, out, x, blocks.shape[1], R.shape[1], two,
+                            update)
     else:
-        def apply_blocks(blocks, cell_dofs, R, R2, base, step, out):
-            _apply_blocks_n(blocks, cell_dofs, R, R2, base, step, out, scratch((nb, nc)), nb, nc, two, update)
+        def apply_blocks(blocks, cell_dofs, R, R2, kind, bases, step, out):
+            _apply_blocks_n(blocks, cell_dofs, R, R2, kind, bases, step, out, scratch((nb, nc)), nb, nc, two, update)
     return apply_blocks
 
 
 @njit(cache=True, inline="always")
-def _apply_blocks_n(blocks, cell_dofs, R, R2, base, step, out, x, nb, nc, two, update):
+def _apply_blocks_n(blocks, cell_dofs, R, R2, kind, bases, step, out, x, nb, nc, two, update):
     """Each cell's rows of R (+ R2) gathered into ``x`` (nb, nc) before its rows of ``out`` are
     written: the compiler cannot tell ``out`` from the arrays it reads and, reading them in place,
     loads them again after every store (the pass x3-4 slower on one thread, where
@@ -76,7 +80,7 @@ def _apply_blocks_n(blocks, cell_dofs, R, R2, base, step, out, x, nb, nc, two, u
                 s = 0.0
                 for m in range(nb):
                     s += blocks[c, k, m] * x[m, j]
-                out[i, j] = base[i, j] + step * s if update else s
+                out[i, j] = base_entry(kind, bases, i, j) + step * s if update else s
 
 
 def dg_element(d, order):
@@ -257,7 +261,7 @@ class DGFEM(GodunovScheme):
         each dof summing its own points (`parallel.matmul` on B^T)."""
         return parallel.matmul(self.B_T, S, scale=self.gauss.volume)
 
-    def rate_update(self, U_dofs, base, step, time, dt, U_points=None, Q_points=None):
+    def rate_update(self, U_dofs, base, step, time, U_points=None, Q_points=None):
         """base + step dU/dt, dU/dt = M^-1 (surface + volume terms + source), and the boundary
         power: the terms' sum, M^-1 and the update in one pass over the cells (`mass_update`).
         U_points, Q_points: U_dofs's values at the Gauss points and the law there, where known
@@ -290,7 +294,7 @@ class DGFEM(GodunovScheme):
         state: no product with B, no law's pass."""
         def rk_stage(U_eval, base, t, step):
             at = (U_points, Q_points) if U_eval is U else (None, None)
-            U_next, power = self.rate_update(U_eval, base, step, t, dt, *at)
+            U_next, power = self.rate_update(U_eval, base, step, t, *at)
             return self.limit(U_next), power
 
         return integrators.INTEGRATORS[self.integrator](rk_stage, U, time, dt)

@@ -561,7 +561,7 @@ class DGMPM(GodunovScheme):
             cell_update(cells, out)
             self.add_source(time, (step, self.inv_volume), out)
             return out, power
-        out = np.empty_like(base) if out is None else out
+        out = np.empty(base.shape) if out is None else out   # base: an array or RK2's `Combination`
         weight = (step, self.inv_M)              # step M^-1, node by node
         euler_update(self.gather_interior, flux, corr, dt, grid_state.Q, self.stiffness, base, weight, out)
         return out, self.add_boundary_terms(terms, time, dt, weight, out)

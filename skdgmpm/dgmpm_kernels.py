@@ -42,6 +42,7 @@ from .equations import (add_normal_flux, ctu_parts, ctu_parts_opposite, ctu_spli
 from .bcs import ghost_face
 from .faces import gather_row
 from .health import identity_if_not
+from .integrators import base_entry, base_parts
 from .kernel_cache import kernel_factory, scratch
 from .system import DIMENSION, volume_row
 
@@ -661,19 +662,21 @@ def euler_update(gather, flux, corr, dt, Q, stiffness, base, weight, out):
     nodal Q computed row by row in the same pass (`system.volume_row`: never stored), given the
     interior faces' fluxes (nf, nc) and corrections per unit Delta t as `interface_flux` gives
     them (nf, sides, nc), `face_corrections`, and w = step M^-1 given as ``weight`` = (step,
-    inv_M (n_dofs,)).
+    inv_M (n_dofs,)). ``base``: an array, or an integrator's `Combination` (RK2's mean), formed
+    here entry by entry.
     G (n_dofs, nf) is the interior surface integral as a gather (`DGMPM.gather_interior`): row i
     holds measure_f (T_R - T_L)[f, i] over the faces f of node i. In parallel chunks of the
     nodes."""
-    parallel.chunked(len(base), _euler_update(flux.shape[1], corr.shape[1]), "cwwwwcr(wr)r",
-                     (tuple(gather), flux, corr, dt, Q, tuple(stiffness), base, weight, out))
+    kind, bases = base_parts(base)
+    parallel.chunked(len(out), _euler_update(flux.shape[1], corr.shape[1]), "cwwwwcw(rrrr)(wr)r",
+                     (tuple(gather), flux, corr, dt, Q, tuple(stiffness), kind, bases, weight, out))
 
 
 @kernel_factory
 def _euler_update(nc, sides):           # literals: the loops unrolled, the corrections read as they are kept
     d = DIMENSION[nc]
 
-    def euler_update(gather, flux, corr, dt, Q, stiffness, base, weight, out):
+    def euler_update(gather, flux, corr, dt, Q, stiffness, kind, bases, weight, out):
         indptr, indices, data = gather
         step, inv_M = weight
         r = scratch((nc,))
@@ -691,7 +694,7 @@ def _euler_update(nc, sides):           # literals: the loops unrolled, the corr
                     else:
                         r[c] += g * flux[f, c]
             for c in range(nc):
-                out[i, c] = base[i, c] + (step * inv_M[i]) * r[c]
+                out[i, c] = base_entry(kind, bases, i, c) + (step * inv_M[i]) * r[c]
     return euler_update
 
 

@@ -5,39 +5,61 @@ provides (`skdgmpm.scheme`):
 
 L = M^-1 R, the semi-discrete right-hand side at U_eval with boundary values at time t; ``power``
 the power through the boundary of that evaluation (W). A scheme fuses the update into its pass over
-the nodes (DGMPM) or forms it after the right-hand side (DGFEM, which also applies its limiter to
-each stage's result). ADER-DG is not a Runge-Kutta method: its predictor-corrector step is the
+the nodes (DGMPM) or over the cells' mass blocks (DGFEM, which also applies its limiter to each
+stage's result). ``base`` is an array, or a `Combination` of earlier states (RK2's mean, RK4's
+last base) that the scheme's update pass forms entry by entry where it reads it (`base_parts`,
+`base_entry`): no pass over memory of its own, the same bits (`formed` forms it in numpy, for a
+stage without such a pass). ADER-DG is not a Runge-Kutta method: its predictor-corrector step is the
 scheme's own (`skdgmpm.ader`). Each returns (U at t + dt, boundary work over the step (J)).
 
-The combinations of states between the stages are compiled passes on the threads
-(`skdgmpm.parallel`), each entry computed by the same operations in the same order as the numpy
-expression in its comment (the same bits, for any thread count).
+Each entry of a combination of states is computed by the same operations in the same order as
+the numpy expression in its comment (the same bits, for any thread count).
 """
-import numpy as np
+from typing import NamedTuple
+
 from numba import njit
 
-from . import parallel
+MEAN, RK4_BASE = 1, 2           # the kinds of `Combination` (0: an array, `base_parts`)
 
 
-def _combine(kernel, *arrays):
-    """``kernel(*flat chunks, out chunk)`` over the entries of equally shaped arrays, in parallel."""
-    flat = [np.ascontiguousarray(a).reshape(-1) for a in arrays]
-    out = np.empty(arrays[0].shape)
-    o = out.reshape(-1)
-    parallel.chunked(len(o), kernel, "r" * (len(flat) + 1), (*flat, o))
-    return out
+class Combination(NamedTuple):
+    """A stage's base as a combination of earlier states (arrays of one shape), formed by the
+    scheme's update pass where it reads each entry (`base_entry`): ``kind`` MEAN, (a + b) / 2 of
+    ``arrays`` = (a, b); RK4_BASE, (a + 2 b + c - d) / 3 of (a, b, c, d)."""
+    kind: int
+    arrays: tuple
+
+    @property
+    def shape(self):
+        return self.arrays[0].shape
 
 
-@njit(cache=True, nogil=True)
-def _mean(a, b, out):
-    for i in range(len(out)):
-        out[i] = 0.5 * (a[i] + b[i])
+def base_parts(base):
+    """(kind, four arrays) of a stage's base as an update pass takes it (`base_entry`): an array
+    is kind 0, itself four times; a `Combination` its kind and arrays (padded with its first)."""
+    if isinstance(base, Combination):
+        return base.kind, tuple(base.arrays) + (base.arrays[0],) * (4 - len(base.arrays))
+    return 0, (base, base, base, base)
 
 
-@njit(cache=True, nogil=True)
-def _rk4_base(U2, U3, U4, U, out):
-    for i in range(len(out)):
-        out[i] = (U2[i] + 2.0 * U3[i] + U4[i] - U[i]) / 3.0
+@njit(cache=True, inline="always")
+def base_entry(kind, bases, i, j):
+    """Entry (i, j) of a stage's base from `base_parts`."""
+    a, b, c, d = bases
+    if kind == MEAN:
+        return 0.5 * (a[i, j] + b[i, j])                        # 0.5 * (U + U1)
+    if kind == RK4_BASE:
+        return (a[i, j] + 2.0 * b[i, j] + c[i, j] - d[i, j]) / 3.0      # (U2 + 2 U3 + U4 - U) / 3
+    return a[i, j]
+
+
+def formed(base):
+    """A stage's base as an array (numpy's operations of `base_entry`): for a stage whose update
+    has no pass to form it in."""
+    if not isinstance(base, Combination):
+        return base
+    a = base.arrays
+    return 0.5 * (a[0] + a[1]) if base.kind == MEAN else (a[0] + 2.0 * a[1] + a[2] - a[3]) / 3.0
 
 
 def euler(stage, U, t, dt):
@@ -50,7 +72,7 @@ def euler(stage, U, t, dt):
 def heun(stage, U, t, dt):
     """Heun's method (TVD-RK2) [R18 §7.1]: U1 = U + dt L(U, t), U2 = (U + U1) / 2 + dt / 2 L(U1, t + dt)."""
     U1, p1 = stage(U, U, t, dt)
-    U2, p2 = stage(U1, _combine(_mean, U, U1), t + dt, 0.5 * dt)      # 0.5 * (U + U1)
+    U2, p2 = stage(U1, Combination(MEAN, (U, U1)), t + dt, 0.5 * dt)      # 0.5 * (U + U1)
     return U2, 0.5 * dt * (p1 + p2)
 
 
@@ -61,7 +83,7 @@ def rk4(stage, U, t, dt):
     U2, p1 = stage(U, U, t, 0.5 * dt)
     U3, p2 = stage(U2, U, t + 0.5 * dt, 0.5 * dt)
     U4, p3 = stage(U3, U, t + 0.5 * dt, dt)
-    U5, p4 = stage(U4, _combine(_rk4_base, U2, U3, U4, U), t + dt, dt / 6.0)   # (U2 + 2 U3 + U4 - U) / 3
+    U5, p4 = stage(U4, Combination(RK4_BASE, (U2, U3, U4, U)), t + dt, dt / 6.0)   # (U2 + 2 U3 + U4 - U) / 3
     return U5, dt / 6.0 * (p1 + 2.0 * p2 + 2.0 * p3 + p4)
 
 

@@ -61,20 +61,28 @@ def test_bars_run_stably_for_every_order(scene, order):
 
 
 @pytest.mark.parametrize("nb, nc", [(4, 6), (9, 6), (16, 6), (3, 2)])   # Q1, Q2 (literal sizes), Q3 and 1D P2 (read at run time)
-@pytest.mark.parametrize("two, update", [(False, False), (True, True)])
+@pytest.mark.parametrize("two, update", [(False, False), (True, True), (True, "mean"), (False, "rk4")])
 def test_mass_blocks_give_the_bits_of_the_row_by_row_sum(nb, nc, two, update):
     """`_apply_blocks` (M^-1 R cell by cell; with R2 and base an explicit stage's update in the same
     pass) against the sum written out in Python, term by term in the same order: the same bits.
-    The cells' dofs are shuffled, so that a kernel that wrote a cell's rows of ``out`` before it
-    had read them all, or read another cell's, would differ."""
+    The base an array, or RK2's mean and RK4's last base (`integrators.Combination`) formed in the
+    pass: the bits of numpy's combination (`integrators.formed`, the expressions the integrators
+    computed in passes of their own before). The cells' dofs are shuffled, so that a kernel that
+    wrote a cell's rows of ``out`` before it had read them all, or read another cell's, would
+    differ."""
     from skdgmpm.dgfem import _apply_blocks
+    from skdgmpm.integrators import MEAN, RK4_BASE, Combination, formed
     rng = np.random.default_rng(nb * nc)
     n_cells = 7
     blocks = rng.standard_normal((n_cells, nb, nb))
     cell_dofs = rng.permutation(n_cells * nb).astype(np.int32).reshape(n_cells, nb)
-    R, R2, base = (rng.standard_normal((n_cells * nb, nc)) for _ in range(3))
+    R, R2, base, b, c, d = (rng.standard_normal((n_cells * nb, nc)) for _ in range(6))
+    base = {True: base, "mean": Combination(MEAN, (base, b)), "rk4": Combination(RK4_BASE, (base, b, c, d))}.get(update)
     out = np.full_like(R, np.nan)
-    _apply_blocks(blocks, cell_dofs, R, out, R2 if two else None, base if update else None, 0.3)
+    _apply_blocks(blocks, cell_dofs, R, out, R2 if two else None, base, 0.3)
+    if update == "mean":
+        assert np.array_equal(formed(base), 0.5 * (base.arrays[0] + b))
+    base = formed(base)
     expected = np.empty_like(R)
     for c in range(n_cells):
         for k in range(nb):
