@@ -3,7 +3,7 @@
     python bench/pass_gaps.py [--method dgmpm-ctu] [--size 256] [--threads 2] [--steps 100]
 
 The bench's plate is stepped on ``--threads`` threads; every threaded pass (`parallel.chunked`,
-the pool's `parallel.rows`; a pass inside another counted once) is timestamped as it starts and
+`parallel.together`, the pool's `parallel.rows`; a pass inside another counted once) is timestamped as it starts and
 ends. Prints the median wall time of each gap (from the step's start to its first pass, between
 two passes, from its last pass to its end), named by the passes around it, and each pass's own
 time. `serial_share.py` gives the sum; this says where it is. Timings are measurements on the
@@ -18,26 +18,35 @@ from skdgmpm import bench, parallel
 from skdgmpm.build import build
 
 
+def pass_name(call, args):
+    """The name of a threaded pass: its kernel's (`parallel.chunked`, `parallel.rows`), or its
+    passes' joined by "+" (`parallel.together`)."""
+    if call.__name__ == "together":
+        return "+".join(getattr(p.kernel, "__name__", "chunked") for p in args)
+    return getattr(args[1], "__name__", call.__name__)
+
+
 def timestamped(marks, patch=setattr):
-    """Wrap `parallel.chunked` and `parallel.rows` to append ("in", kernel name, t) and ("out",
-    "", t) to ``marks`` around each outermost pass. ``patch(module, name, value)`` replaces each
-    (a test passes pytest's monkeypatch.setattr, which undoes it)."""
+    """Wrap `parallel.chunked`, `parallel.together` and `parallel.rows` to append ("in", pass name,
+    t) and ("out", "", t) to ``marks`` around each outermost pass (`pass_name`). ``patch(module,
+    name, value)`` replaces each (a test passes pytest's monkeypatch.setattr, which undoes it)."""
     depth = [0]
 
     def wrap(call):
-        def timed(n, kernel, *args, **kwargs):
+        def timed(*args, **kwargs):
             depth[0] += 1
             if depth[0] == 1:
-                marks.append(("in", getattr(kernel, "__name__", call.__name__), time.perf_counter()))
+                marks.append(("in", pass_name(call, args), time.perf_counter()))
             try:
-                return call(n, kernel, *args, **kwargs)
+                return call(*args, **kwargs)
             finally:
                 depth[0] -= 1
                 if depth[0] == 0:
                     marks.append(("out", "", time.perf_counter()))
+        timed.__name__ = call.__name__
         return timed
-    patch(parallel, "chunked", wrap(parallel.chunked))
-    patch(parallel, "rows", wrap(parallel.rows))
+    for name in ("chunked", "together", "rows"):
+        patch(parallel, name, wrap(getattr(parallel, name)))
 
 
 def split(marks, t0, t1):

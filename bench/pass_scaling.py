@@ -58,26 +58,31 @@ def arrays(parsed, args):
 
 
 def counted(sizes, patch=setattr):
-    """Wrap `parallel.chunked` to add each outermost call's (streamed, whole) bytes to
+    """Wrap `parallel.chunked` and `parallel.together` to add each outermost call's (streamed,
+    whole) bytes (both passes' for `together`, each buffer once per pass) to
     ``sizes[kernel name]`` (a list of pairs, one per call) while the switch it returns is on
     (``switch[0] = True``; off as made): the walk over a call's arguments costs a step's Python
     as much again as the step's own between its passes, so the timed steps run with it off
     (`measure`). ``patch(module, name, value)`` replaces it (a test passes pytest's
     monkeypatch.setattr, which undoes it)."""
-    chunked, depth, switch = parallel.chunked, [0], [False]
+    depth, switch = [0], [False]
 
-    def sized(n, kernel, spec, args, *rest, **kwargs):
-        depth[0] += 1
-        try:
-            if depth[0] == 1 and switch[0]:
-                found = arrays(parallel._parsed(spec), args)
-                streamed = sum(a.nbytes for letter, a in found if letter in STREAMED)
-                sizes[getattr(kernel, "__name__", "chunked")].append(
-                    (streamed, sum(a.nbytes for _, a in found) - streamed))
-            return chunked(n, kernel, spec, args, *rest, **kwargs)
-        finally:
-            depth[0] -= 1
-    patch(parallel, "chunked", sized)
+    def wrap(call):
+        def sized(*args, **kwargs):
+            depth[0] += 1
+            try:
+                if depth[0] == 1 and switch[0]:
+                    passes = args if call.__name__ == "together" else (parallel.Pass(*args, **kwargs),)
+                    found = [x for p in passes for x in arrays(parallel._parsed(p.spec), p.args)]
+                    streamed = sum(a.nbytes for letter, a in found if letter in STREAMED)
+                    sizes[pass_gaps.pass_name(call, args)].append((streamed, sum(a.nbytes for _, a in found) - streamed))
+                return call(*args, **kwargs)
+            finally:
+                depth[0] -= 1
+        sized.__name__ = call.__name__
+        return sized
+    for name in ("chunked", "together"):
+        patch(parallel, name, wrap(getattr(parallel, name)))
     return switch
 
 

@@ -4,7 +4,7 @@
     python bench/serial_share.py [--methods dgmpm-dcu,dgmpm-ctu] [--size 256] [--steps 100] [--threads 2]
 
 Each method's bench plate is stepped on ``--threads`` threads; every threaded pass is timed from the
-calling thread: numba's compiled chunk loops (`parallel.chunked`) and the pool's `parallel.rows`
+calling thread: numba's compiled chunk loops (`parallel.chunked`, `parallel.together`) and the pool's `parallel.rows`
 (where numba's layer cannot run them; a pass inside another is counted once). What is left of
 the step is the Python between them, the numpy calls on whole arrays and the compiled passes kept
 on one thread. A share s of the k-thread step run on one thread caps k threads at k - (k - 1) s over
@@ -41,11 +41,11 @@ class Clock:
 
 
 def hook(clock, patch=setattr):
-    """Time every threaded pass: `parallel.chunked` (every chunked pass goes through it) and the
-    pool's `parallel.rows`. ``patch(module, name, value)`` replaces each (a test passes pytest's
-    monkeypatch.setattr, which undoes it)."""
-    patch(parallel, "chunked", clock.wrap(parallel.chunked))
-    patch(parallel, "rows", clock.wrap(parallel.rows))
+    """Time every threaded pass: `parallel.chunked` and `parallel.together` (every chunked pass
+    goes through one of them) and the pool's `parallel.rows`. ``patch(module, name, value)``
+    replaces each (a test passes pytest's monkeypatch.setattr, which undoes it)."""
+    for name in ("chunked", "together", "rows"):
+        patch(parallel, name, clock.wrap(getattr(parallel, name)))
 
 
 def share(method, n, steps, threads, clock):

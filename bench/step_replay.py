@@ -37,21 +37,40 @@ class Replay:
     step left."""
 
     def __init__(self, stepping):
-        calls, chunked = [], parallel.chunked
+        calls, chunked, together, depth = [], parallel.chunked, parallel.together, [0]
 
         def capture(n, kernel, spec, args, returns=0, min_rows=None):
-            calls.append((n, min_rows, kernel, spec, args, returns))
+            if depth[0] == 0:
+                calls.append((n, min_rows, kernel, spec, args, returns))
             return chunked(n, kernel, spec, args, returns, min_rows)
-        parallel.chunked = capture
+
+        def capture_together(first, second):    # replayed as it ran: two passes in one loop
+            calls.append((first, second))
+            depth[0] += 1
+            try:
+                return together(first, second)
+            finally:
+                depth[0] -= 1
+        parallel.chunked, parallel.together = capture, capture_together
         try:
             t0 = time.perf_counter()
             stepping()
             self.seconds = time.perf_counter() - t0
         finally:
-            parallel.chunked = chunked
-        self.names = [getattr(kernel, "__name__", "chunked") for _, _, kernel, *_ in calls]
+            parallel.chunked, parallel.together = chunked, together
+        self.names = ["+".join(p.kernel.__name__ for p in call) if len(call) == 2 else
+                      getattr(call[2], "__name__", "chunked") for call in calls]
         self.passes, written = [], {}
-        for n, min_rows, kernel, spec, args, returns in calls:
+        for call in calls:
+            if len(call) == 2:
+                self.passes.append(call)
+                for p in call:
+                    flat = []
+                    parallel._shape(p.args, flat)
+                    written.update((id(a), a) for a in flat
+                                   if isinstance(a, np.ndarray) and a.size and a.flags.writeable)
+                continue
+            n, min_rows, kernel, spec, args, returns = call
             plan = parallel._PLANS.get((kernel, spec, returns))     # made where a step ran a chunk loop
             if plan is None:                # never on several threads: replayed through `chunked`
                 self.passes.append((n, min_rows, None, 0, (kernel, spec, args, returns), False))
@@ -81,7 +100,11 @@ class Replay:
 
     def __call__(self):
         """The passes once, back to back, on the current thread count."""
-        for n, min_rows, loop, width, arguments, first in self.passes:
+        for entry in self.passes:
+            if len(entry) == 2:             # `parallel.together`'s two passes
+                self.stopped += sum(r >= 0 for r in parallel.together(*entry))
+                continue
+            n, min_rows, loop, width, arguments, first = entry
             if loop is None:
                 kernel, spec, args, returns = arguments
                 result = parallel.chunked(n, kernel, spec, args, returns, min_rows)

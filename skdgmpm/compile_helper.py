@@ -325,6 +325,8 @@ def _split_faces(dgmpm, share, fill):
     boundary faces to the end of the step's first stage (the law's pass, or RK2's law at the
     nodes, which the other compiles): the Euler stage of the cells' records as they come (for a
     placeholder state, not all recorded: the corrections gathered on the edges) compiled too."""
+    from . import parallel
+
     def placeholder(outputs, returns=None):
         def skipped(*args):
             for a in args[len(args) - outputs:]:
@@ -332,12 +334,15 @@ def _split_faces(dgmpm, share, fill):
             return returns
         return skipped
 
+    def placeholder_pass(outputs):      # a face pass described (`parallel.Pass`): one chunk, in Python
+        return lambda *args: parallel.Pass(1, placeholder(outputs, -1), "w" * len(args), args, "first")
+
     if share == "boundary":
         def stop(*args, **kwargs):
             raise _LawPass
 
         # interior_pass(..., flux, G); cell_corrections(..., W, corr_bnd): W is G, in place
-        dgmpm.interior_pass, dgmpm.cell_corrections = placeholder(2, -1), placeholder(1)
+        dgmpm.interior_pass, dgmpm.cell_corrections = placeholder_pass(2), placeholder(1)
         dgmpm.DGMPM.nodal_state = stop
     elif share == "interior":
         # cell_records(..., rec, state): the records as the helper filled them (`compile_step`),
@@ -346,7 +351,7 @@ def _split_faces(dgmpm, share, fill):
         # the edges gather them: RK2's second stage); boundary_faces(..., flux, t_s, v_s, parts)
         calls = itertools.count()
         dgmpm.cell_records = lambda *args: args[-1].fill(1 if next(calls) == 0 else 0)
-        dgmpm.boundary_faces = placeholder(4, -1)
+        dgmpm.boundary_faces = placeholder_pass(4)
     else:
         raise ValueError(f"compile helper: share {share!r} unknown")
 

@@ -2,7 +2,7 @@
 
 One step is the list of named stages of R18 §5 (a)-(h):
 
-    project -> time_step -> interface_flux -> boundary_flux -> transverse_flux -> source
+    project -> time_step -> interface_flux (interior and boundary faces) -> transverse_flux -> source
     -> advance (with the volume term) -> constitutive_update (with the back map)
 
 ``advance`` is forward Euler [R18 eq 20] or Heun's RK2 with both stages on the grid [R18 §7.1]
@@ -16,10 +16,10 @@ pass); DCU leaves them out. ``source`` adds
 int Phi rho0 b = sum_p S_ip V_p rho0 b(X_p, t) when a body force is set (particle quadrature, at
 the time the boundary values are taken).
 
-The interior faces depend on Delta t only through the factor of the CTU corrections: they are
-computed once per projected state (``fixed_terms``), and an attempt that the CFL guard repeats
-with a smaller Delta t reuses them (the boundary pass, which depends on time, and everything after
-it are redone). A stage of ``advance`` is one compiled pass over the nodes,
+The faces' terms depend on Delta t only through the factor of the CTU corrections and the
+boundary conditions' values at the step's middle: they are computed once per projected state
+(``fixed_terms``), and an attempt that the CFL guard repeats with a smaller Delta t reuses them
+while those values stay as they were (everything after the faces is redone). A stage of ``advance`` is one compiled pass over the nodes,
 U + dt M^-1 (volume term + interior faces), the volume term (c) sum_alpha K^alpha F_alpha(Q)
 computed row by row and the interior faces' integral gathered node by node in that pass (neither
 is stored), to which the boundary faces' terms are then added, weighted by dt M^-1 (no residual
@@ -79,10 +79,9 @@ class DGMPM(GodunovScheme):
     body_force: object = None
     layout: str = "auto"
     particles_key: str = "particles"        # what the errors about the particles name (their scene key)
-    stages: tuple = ("project", "time_step", "advance", "interface_flux", "boundary_flux",
-                     "transverse_flux", "source", "nodal_state", "constitutive_update", "check")
+    stages: tuple = ("project", "time_step", "advance", "interface_flux", "transverse_flux", "source", "nodal_state", "constitutive_update", "check")
     external_work: float = field(default=0.0, init=False)
-    _kept: tuple = field(default=None, init=False, repr=False)   # (projected state, its faces' terms)
+    _kept: tuple = field(default=None, init=False, repr=False)   # (projected state, (ghost values, its faces' terms))
     _work: dict = field(default_factory=dict, init=False, repr=False)    # `_buffer`'s arrays, by name
 
     def __post_init__(self):
@@ -337,12 +336,17 @@ class DGMPM(GodunovScheme):
         return system.volume_flux(grid_state.Q, self.stiffness, out)
 
     @stage
-    def interface_flux(self, grid_state):
-        """(e) Godunov fluxes at interior faces from the linearised Riemann solver with (CTU) the
-        transverse corrections of both sides' fluctuations. Returns the fluxes (nf, nc) and the
-        corrections per unit Delta t of the interior faces' fluxes as the Euler pass reads them,
-        (nf, sides, nc) (`dgmpm_kernels.face_corrections`: the parts both cells send, the
-        gathered correction, or none for DCU), and of the boundary faces' fluxes (nb, nc)."""
+    def interface_flux(self, grid_state, time):
+        """(d)-(e) Godunov fluxes at the interior faces from the linearised Riemann solver, and at
+        the boundary faces from the ghost states of their conditions at ``time`` (stationary
+        states t*, v*), with (CTU) the transverse corrections of the fluctuations entering the
+        cells. Returns the faces' terms (flux, corr, corr_bnd, boundary flux, t*, v*): the
+        interior faces' fluxes (nf, nc) and their corrections per unit Delta t as the Euler pass
+        reads them, (nf, sides, nc) (`dgmpm_kernels.face_corrections`: the parts both cells send,
+        the gathered correction, or none for DCU), the boundary faces' corrections per unit Delta
+        t (nb, nc), fluxes (nb, nc) and stationary states (nb, d). Both kinds of faces in one
+        pass over the threads (`parallel.together`), but where a cell may be unrecorded (the
+        trace path, whose kernels two compile helpers share out: `skdgmpm.compile_helper`)."""
         f, nc = self.interior, grid_state.U.shape[1]
         ctu = self.ctu is not None
         # forward Euler: one projected state's faces a step (the CFL guard's attempts reuse them),
@@ -369,48 +373,50 @@ class DGMPM(GodunovScheme):
             h_L = h_R = np.zeros(0)
             n_L = n_R = np.zeros((0, 2, 2))
 
-        bad = interior_pass(T_L, T_R, grid_state.U, grid_state.Q, rho, f.normal, f.cell_L, f.cell_R,
-                            self.cell_material, *laws, (rec, state, normals, k_L, k_R, recorded, self.trace_path), ctu,
-                            (h_L, n_L), (h_R, n_R), flux, G)
-        if bad >= 0:
-            _not_hyperbolic(bad)
+        interior = interior_pass(T_L, T_R, grid_state.U, grid_state.Q, rho, f.normal, f.cell_L, f.cell_R,
+                                 self.cell_material, *laws, (rec, state, normals, k_L, k_R, recorded, self.trace_path),
+                                 ctu, (h_L, n_L), (h_R, n_R), flux, G)
+        boundary, (flux_b, t_s, v_s, parts) = self.boundary_pass(grid_state, time)
+        if self.trace_path:
+            bad, bad_b = parallel.chunked(*interior), parallel.chunked(*boundary)
+        else:
+            bad, bad_b = parallel.together(interior, boundary)
+        for first in (bad, bad_b):
+            if first >= 0:
+                _not_hyperbolic(first)
         if ctu and recorded:
             sources, scale, signs = self.cell_sources
             W = G.reshape(-1, nc)
             cell_corrections(sources, scale, signs, rec, normals, W, corr_bnd)
-            return flux, G, corr_bnd
-        if ctu:
+            corr = G
+        elif ctu:
             corr = np.empty((len(f), 1, nc))
-            parts = G.reshape(-1, nc)               # each edge: sum_k sign_k G[part_k], in face order
-            parallel.matmul(to_interior, parts, corr[:, 0])
-            boundary_edge_corrections(to_boundary, parts, corr_bnd)
-            return flux, corr, corr_bnd
-        return flux, np.empty((len(f), 0, nc)), corr_bnd
+            parts_int = G.reshape(-1, nc)           # each edge: sum_k sign_k G[part_k], in face order
+            parallel.matmul(to_interior, parts_int, corr[:, 0])
+            boundary_edge_corrections(to_boundary, parts_int, corr_bnd)
+        else:
+            corr = np.empty((len(f), 0, nc))
+        if ctu:         # the corrections of the fluctuations entering the boundary cells, where they go
+            boundary_corrections(self.topology["boundary"], parts, corr, corr_bnd)
+        return flux, corr, corr_bnd, flux_b, t_s, v_s
 
-    @stage
-    def boundary_flux(self, grid_state, time, corr, corr_bnd):
-        """(d) ghost states -> boundary stationary states (t*, v*) and fluxes (nb, nc), with (CTU)
-        the transverse corrections per unit Delta t of the fluctuations entering the boundary
-        cells added to the interior faces' ``corr`` and the boundary faces' ``corr_bnd``
-        (`interface_flux`'s): like the interior faces', they depend on Delta t only through that
-        factor (`fixed_terms`). A face whose cell is recorded reads its side in the cell records,
-        which `interface_flux` has just made or found for this state. Returns the fluxes and
-        (t*, v*)."""
+    def boundary_pass(self, grid_state, time):
+        """The boundary faces' pass (`dgmpm_kernels.boundary_faces`, a `parallel.Pass`: run, it
+        returns the first face that is not hyperbolic, or -1) and the arrays it fills: fluxes (nb,
+        nc), stationary states t*, v* (nb, d) under the conditions at ``time`` and (CTU) the parts
+        of the fluctuations entering the boundary cells (nb, 2, nc), for `boundary_corrections`. A
+        face whose cell is recorded reads its side in the cell records (those of this state)."""
         b, d, g, ctu = self.boundary, self.d, self.ghosts, self.ctu is not None
         nb, nc = len(b), grid_state.U.shape[1]
         flux, t_s, v_s = np.empty((nb, nc)), np.empty((nb, d)), np.empty((nb, d))
         parts = self._buffer("boundary parts", (nb if ctu else 0, 2, nc))
         rec, state = self._records()
-        args = (self.traces["boundary"], grid_state.U, grid_state.Q, self.density, b.normal, b.cell_L,
-                self.cell_material, *self.laws, (g.frame, g.velocity, g.values_at(time), g.copy), ctu,
-                self.topology["boundary"],
-                (rec, state, self.cell_normals, self.boundary_local_face, self.trace_path), flux, t_s, v_s, parts)
-        bad = boundary_faces(*args)
-        if bad >= 0:
-            _not_hyperbolic(bad)
-        if ctu:
-            boundary_corrections(self.topology["boundary"], parts, corr, corr_bnd)
-        return flux, t_s, v_s
+        run = boundary_faces(self.traces["boundary"], grid_state.U, grid_state.Q, self.density, b.normal, b.cell_L,
+                             self.cell_material, *self.laws, (g.frame, g.velocity, g.values_at(time), g.copy), ctu,
+                             self.topology["boundary"],
+                             (rec, state, self.cell_normals, self.boundary_local_face, self.trace_path), flux, t_s,
+                             v_s, parts)
+        return run, (flux, t_s, v_s, parts)
 
     @stage
     def transverse_flux(self, terms, dt, weight, out):
@@ -503,17 +509,21 @@ class DGMPM(GodunovScheme):
         return filt
 
     def fixed_terms(self, grid_state, time):
-        """The faces' terms of a grid state at ``time``: `interface_flux` and `boundary_flux`
-        ((flux, corrections, boundary corrections, boundary flux, t*, v*)). They depend on Delta
-        t only through the factor of the CTU corrections, so the CFL guard's repeated attempts on
-        the projected state reuse them. (The volume term is computed inside the Euler stage's
-        pass over the nodes.)"""
-        if self._kept is not None and self._kept[0] is grid_state and self._kept[1] is not None:
-            return self._kept[1]
-        flux, corr, corr_bnd = self.interface_flux(grid_state)
-        terms = (flux, corr, corr_bnd, *self.boundary_flux(grid_state, time, corr, corr_bnd))
-        if self._kept is not None and self._kept[0] is grid_state:
-            self._kept = (grid_state, terms)
+        """The faces' terms of a grid state at ``time`` (`interface_flux`'s: flux, corrections,
+        boundary corrections, boundary flux, t*, v*). They depend on Delta t only through the
+        factor of the CTU corrections and, through the conditions' values at ``time`` (the
+        step's middle), through the schedules of time-dependent conditions: the CFL guard's
+        repeated attempts on the projected state reuse them while those values stay as they were
+        (`BoundaryGhosts.values_at` returns the same array), and compute them anew where a ramp
+        or a release makes them differ at the shorter step's middle. (The volume term is
+        computed inside the Euler stage's pass over the nodes.)"""
+        values = self.ghosts.values_at(time)
+        kept = self._kept
+        if kept is not None and kept[0] is grid_state and kept[1] is not None and kept[1][0] is values:
+            return kept[1][1]
+        terms = self.interface_flux(grid_state, time)
+        if kept is not None and kept[0] is grid_state:
+            self._kept = (grid_state, (values, terms))
         return terms
 
     def add_boundary_terms(self, terms, time, dt, weight, out):

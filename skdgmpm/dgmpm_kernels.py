@@ -310,14 +310,14 @@ def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, p
     2, nc) instead, for `cell_corrections`. ``traces``: whether a cell may be unrecorded (any
     layout but one particle per cell); without, the trace path is not compiled. One kernel serves
     a grid's every state, recorded or not: a run compiles it in its first step. G and the
-    topologies are empty without CTU. The faces in chunks on the threads (`parallel.chunked`).
-    Returns the first face whose acoustic tensor is not positive definite, or -1."""
+    topologies are empty without CTU. Returns the pass, the faces in chunks on the threads (a
+    `parallel.Pass`, to run alone or with the boundary faces': `parallel.together`), which
+    returns the first face whose acoustic tensor is not positive definite, or -1."""
     rec, state, normals, k_L, k_R, recorded, traces = records
     kernel = _interior_pass(N.shape[1], normals.shape[1], bool(traces), only_law(laws))
-    return parallel.chunked(len(N), kernel, "ccwwwrrrwwwwwwrrww(rr)(rr)rr",
-                            (parallel.csr(T_L), parallel.csr(T_R), U, Q, rho, N, cell_L, cell_R, cell_material, laws,
-                             params, rec, state, normals, k_L, k_R, bool(recorded), ctu, topo_L, topo_R, flux, G),
-                            "first")
+    return parallel.Pass(len(N), kernel, "ccwwwrrrwwwwwwrrww(rr)(rr)rr",
+                         (parallel.csr(T_L), parallel.csr(T_R), U, Q, rho, N, cell_L, cell_R, cell_material, laws,
+                          params, rec, state, normals, k_L, k_R, bool(recorded), ctu, topo_L, topo_R, flux, G), "first")
 
 
 @kernel_factory
@@ -505,13 +505,13 @@ def boundary_faces(T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, c
     (every cell always recorded, as `interior_pass` has it) that path is not compiled: a 2D
     kernel without it compiles in a third of the time. Each face writes its own rows:
     chunks run in parallel, each of an eighth of `parallel.MIN_ROWS` faces at least. Returns the
-    first face whose acoustic tensor, along the face or (CTU) an edge, is not positive definite,
-    or -1."""
+    pass (a `parallel.Pass`), which returns the first face whose acoustic tensor, along the face
+    or (CTU) an edge, is not positive definite, or -1."""
     rec, state, normals, local, traces = records
     kernel = _boundary_faces(N.shape[1], normals.shape[1], bool(traces), only_law(laws))
-    return parallel.chunked(len(N), kernel, "lh" + "w" * 17,
-                            (T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, (rec, state, local),
-                             flux, t_s, v_s, parts), "first", max(1, parallel.MIN_ROWS // 8))
+    return parallel.Pass(len(N), kernel, "lh" + "w" * 17,
+                         (T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, (rec, state, local),
+                          flux, t_s, v_s, parts), "first", max(1, parallel.MIN_ROWS // 8))
 
 
 @kernel_factory

@@ -263,8 +263,8 @@ def test_serial_share_times_every_threaded_pass_once(monkeypatch):
         wall, inside, outside = script.share("dgmpm-dcu", 32, 3, 2, clock)
     finally:
         parallel.set_threads(None)
-    if parallel._compiled_layer():      # law's pass, faces, boundary faces: each step (and repeats)
-        assert calls.count("chunked") >= 3 * (3 + 3), calls         # the 3 warm-up steps too
+    if parallel._compiled_layer():      # law's pass; interior and boundary faces together: each step
+        assert calls.count("chunked") >= 3 + 3 and calls.count("together") >= 3 + 3, calls    # the 3 warm-up steps too
     assert 0 < inside < wall and 0 < outside < wall         # medians over the steps, each its own
 
 
@@ -287,7 +287,7 @@ def test_pass_gaps_cut_each_step_at_its_passes(monkeypatch):
         gaps, passes, walls = script.measure("dgmpm-dcu", 32, steps, 2, marks)
     finally:
         parallel.set_threads(None)
-    assert {"interior_pass", "boundary_faces", "states"} <= set(passes), passes
+    assert {"interior_pass+boundary_faces", "states"} <= set(passes), passes      # the faces in one loop
     names = list(gaps)
     assert names[0].startswith("start -> ") and names[-1].endswith(" -> end")
     for before, after in zip(names, names[1:]):             # a chain: each gap starts where the last ended
@@ -327,10 +327,12 @@ def test_pass_scaling_pairs_every_pass_and_sizes_its_arrays(monkeypatch):
     finally:
         parallel.set_threads(None)
     assert cells == 32 * 32
-    assert {"interior_pass", "states", "step"} <= set(times[1]) and set(times[1]) == set(times[2])
+    faces = "interior_pass+boundary_faces"                      # `parallel.together`: one pass
+    assert {faces, "states", "step"} <= set(times[1]) and set(times[1]) == set(times[2])
     assert all(len(v) == rounds for t in (1, 2) for v in times[t].values())
     for t in (1, 2):                        # a step holds its passes
-        assert all(times[t]["step"][k] > times[t]["states"][k] + times[t]["interior_pass"][k] for k in range(rounds))
+        assert all(times[t]["step"][k] > times[t]["states"][k] + times[t][faces][k] for k in range(rounds))
+    assert len(sizes[faces]) == 2 and all(streamed > 0 for streamed, _ in sizes[faces])    # both passes' arrays
     assert len(sizes["states"]) == 2 and switch == [False]      # one law's pass in each counted step, none timed
     streamed, whole = sizes["states"][0]
     assert streamed >= 2 * cells * 6 * 8 and whole > 0          # at least U and Q (n, 6), cut by rows
@@ -338,7 +340,7 @@ def test_pass_scaling_pairs_every_pass_and_sizes_its_arrays(monkeypatch):
     for t in (1, 2):                        # passes + rest = the step, round by round; the rest >= 0
         passes, rest = split[t]
         assert np.allclose(passes + rest, times[t]["step"], rtol=1e-12, atol=0) and rest.min() >= 0
-        assert np.all(passes >= np.array(times[t]["states"]) + times[t]["interior_pass"])
+        assert np.all(passes >= np.array(times[t]["states"]) + times[t][faces])
     fake = {1: {"a": [3.0, 5.0], "b": [1.0, 1.0], "step": [4.5, 6.5]},
             2: {"a": [2.0, 3.0], "b": [0.5, 0.5], "step": [3.0, 4.0]}}
     (p1, r1), (p2, r2) = script.between(fake, 2).values()       # worked by hand
@@ -347,9 +349,10 @@ def test_pass_scaling_pairs_every_pass_and_sizes_its_arrays(monkeypatch):
 
 def test_step_replay_runs_a_steps_passes_again_and_puts_the_state_back(monkeypatch):
     """bench/step_replay.py: a DCU step at 32^2 (MIN_ROWS 16: its passes in compiled chunk
-    loops) captured as its three passes; replayed on the state it left, saved and put back, the
-    replay computes (the arrays it writes change) the same bits on 1 and 2 threads, and after it
-    the simulation goes on bit for bit as a second one never replayed. The measurement gives each
+    loops) captured as its passes (the faces together, the law's pass); replayed on the state it
+    left, saved and put back, the replay computes (the arrays it writes change) the same bits on
+    1 and 2 threads, and after it the simulation goes on bit for bit as a second one never
+    replayed. The measurement gives each
     kind and count a time per round, and no replayed pass stops at a failed health check."""
     import importlib.util
     from pathlib import Path
@@ -368,8 +371,9 @@ def test_step_replay_runs_a_steps_passes_again_and_puts_the_state_back(monkeypat
         plain()
         replay = script.Replay(replayed)
         plain()
-        assert replay.names == ["interior_pass", "boundary_faces", "states"] and replay.seconds > 0
-        assert all(loop is not None for _, _, loop, *_ in replay.passes)    # compiled chunk loops, not `chunked`
+        assert replay.names == ["interior_pass+boundary_faces", "states"] and replay.seconds > 0
+        assert len(replay.passes[0]) == 2                   # the faces: `parallel.together`'s two passes
+        assert replay.passes[1][2] is not None              # the law's pass: its compiled chunk loop, not `chunked`
         replay.save()
         results = []
         for t in (1, 2, 2):
@@ -425,10 +429,12 @@ def test_one_thread_paths_times_every_pass_called_from_python_and_in_the_compile
     finally:
         parallel.set_threads(None)
     assert parallel._compiled_bounds is original
-    assert {"interior_pass", "states", "step"} <= set(times["python"]) and set(times["python"]) == set(times["loop"])
+    assert {"interior_pass+boundary_faces", "states", "step"} <= set(times["python"])
+    assert set(times["python"]) == set(times["loop"])
     assert all(len(v) == rounds and min(v) > 0 for way in times.values() for v in way.values())
     assert called and all(bounds is original for bounds in called)         # rows: the Python way only
-    assert {"interior_pass", "states"} <= {kernel.__name__ for kernel, _, _ in parallel._PLANS}
+    assert "states" in {kernel.__name__ for kernel, _, _ in parallel._PLANS}
+    assert ("interior_pass", "boundary_faces") in {(key[0].__name__, key[3].__name__) for key in parallel._PAIR_PLANS}
 
 
 def test_compile_times_records_each_compilation_once_with_its_depth():

@@ -52,3 +52,28 @@ def test_the_predicted_step_is_rarely_repeated():
     predicted, mean = _impact("predict")
     assert largest > 1.5
     assert predicted <= 1.05 and mean > 0.965
+
+
+@pytest.mark.parametrize("case", ["dgmpm", "dgmpm nodes"])
+def test_a_repeated_attempt_takes_the_conditions_at_its_own_mid_step(case):
+    """DGMPM's faces' terms of a projected state are kept for the guard's repeated attempts
+    (`DGMPM.fixed_terms`) while the boundary conditions' values stay as they were; where a ramp
+    makes them differ at the shorter step's middle, the attempt computes them anew, with the
+    values at its own time (what a fresh stepper computes there), not the first attempt's."""
+    from skdgmpm.scene import load_scene
+    overrides = ["bc.left.ramp=1e-4"] + (['particles.per_cell=2', 'method.layout="nodes"'] if "nodes" in case else [])
+    disc = build(load_scene("bar_elastic_1d", overrides))
+    st, state = disc.stepper, disc.initial
+    grid_state = st.project(state)
+    first = st.fixed_terms(grid_state, 2e-5)
+    assert st.fixed_terms(grid_state, 2e-5) is first                # the same values: kept
+    shorter = st.fixed_terms(grid_state, 1e-5)                      # the ramp at half: computed anew
+    fresh = build(load_scene("bar_elastic_1d", overrides)).stepper
+    expected = fresh.fixed_terms(fresh.project(state), 1e-5)
+    t_first, t_shorter = first[4].copy(), shorter[4]
+    for mine, ref in zip(shorter, expected):
+        assert np.array_equal(mine, ref)
+    assert not np.array_equal(t_first, t_shorter)
+    assert st.fixed_terms(grid_state, 1e-5) is shorter
+    later = st.fixed_terms(grid_state, 2e-4)                        # past the ramp: amplitude 1
+    assert st.fixed_terms(grid_state, 3e-4) is later

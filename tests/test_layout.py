@@ -97,7 +97,7 @@ def test_records_of_the_constitutive_update_are_those_of_the_record_pass(case):
     (face, split), rec_state = st._records()
     kept = (face.copy(), split.copy(), rec_state.copy())
     st._records_of = None                   # what a state without kept records gets
-    st.interface_flux(GridState(state.U, state.Q))
+    st.interface_flux(GridState(state.U, state.Q), state.t)
     (face, split), rec_state = st._records()
     for a, b in zip(kept, (face, split, rec_state)):
         np.testing.assert_array_equal(a, b)
@@ -176,7 +176,7 @@ def test_the_initial_state_takes_the_steps_law_pass_and_its_records(case, monkey
     reference = twin.initial_state(F, v)
     twin._records_of = None                 # the first step's records from the record pass
     (face, split), rec_state = twin._records()
-    twin.interface_flux(GridState(reference.U, reference.Q))
+    twin.interface_flux(GridState(reference.U, reference.Q), reference.t)
     made = (face.copy(), split.copy(), rec_state.copy())
     twin._records_of = None
     other = twin.step(reference)

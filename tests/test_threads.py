@@ -330,6 +330,55 @@ def test_chunked_plans_again_where_the_arguments_nest_otherwise(monkeypatch):
         parallel.set_threads(None)
 
 
+@numba.njit(nogil=True)
+def _doubled_first_negative(x, out):
+    first = -1
+    for r in range(len(x)):
+        out[r] = 2.0 * x[r]
+        if first < 0 and x[r] < 0:
+            first = r
+    return first
+
+
+@numba.njit(nogil=True)
+def _chunk_length(lo, hi, out):
+    for r in range(lo, hi):
+        out[r] = hi - lo
+
+
+def test_two_passes_together_return_and_write_what_each_does_alone(monkeypatch):
+    """`parallel.together`: two passes in one compiled loop (the first's chunks, then the
+    second's, from one counter) write the bits and return the results that `parallel.chunked`
+    gives each alone, on 1, 2 and 3 threads: the first failing row of a "first" pass (a row of a
+    later chunk than the first), numbers per chunk, and the second pass's chunks cut by its own
+    ``min_rows`` (each row writes its chunk's length). Where the second pass has one chunk, it
+    joins the first's loop all the same; with neither on the threads (one thread), they run
+    through `chunked`. A plan per pair of kernels, made once."""
+    monkeypatch.setattr(parallel, "MIN_ROWS", 16)
+    rng = np.random.default_rng(5)
+    x = rng.random(1000) + 0.1
+    x[[700, 400]] = -1.0
+    b = rng.random(90)
+    try:
+        for threads in (1, 2, 3):
+            parallel.set_threads(threads)
+            for n_b, min_rows in ((90, 32), (90, 10 ** 6)):        # several chunks, one
+                out_a, out_b, ref_a, ref_b = np.zeros(1000), np.zeros(n_b), np.zeros(1000), np.zeros(n_b)
+                first = parallel.Pass(1000, _doubled_first_negative, "rr", (x, out_a), "first")
+                second = parallel.Pass(n_b, _chunk_length, "lhw", (out_b,), 0, min_rows)
+                assert parallel.together(first, second) == (400, None)
+                assert parallel.chunked(1000, _doubled_first_negative, "rr", (x, ref_a), "first") == 400
+                parallel.chunked(n_b, _chunk_length, "lhw", (ref_b,), 0, min_rows)
+                assert np.array_equal(out_a, ref_a) and np.array_equal(out_b, ref_b)
+                assert len(parallel.chunks(n_b, min_rows)) == (1 if threads == 1 or min_rows > 90 else 16)
+                sums = parallel.together(parallel.Pass(90, _chunk_sum, "r", (b,), 2), first)
+                assert np.array_equal(sums[0], parallel.chunked(90, _chunk_sum, "r", (b,), 2)) and sums[1] == 400
+        if parallel._compiled_layer():
+            assert (_doubled_first_negative, "rr", "first", _chunk_length, "lhw", 0) in parallel._PAIR_PLANS
+    finally:
+        parallel.set_threads(None)
+
+
 def test_a_dcu_step_after_a_ctu_step_on_three_threads_keeps_the_heap_whole():
     """The compiled chunk loop once took its arguments as one tuple of arrays of several kinds:
     a CTU simulation on three threads, then a DCU one on two, aborted the process when the second
