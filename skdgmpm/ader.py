@@ -39,7 +39,6 @@ from .constitutive import law_point
 from .dgfem import DGFEM
 from .equations import add_flux
 from .kernel_cache import kernel_factory, scratch
-from .riemann import _not_hyperbolic
 from .scheme import stage
 
 
@@ -299,7 +298,7 @@ class ADERDGFEM(DGFEM):
     picard_tol: float = 1e-12
     picard_max: int = 0                     # 0: `default_picard_max`
     picard_guess: str = "taylor"            # or "constant" (u_hat = U^n at every time node)
-    stages: tuple = ("time_step", "advance", "predictor", "corrector", "surface_integral", "boundary_flux",
+    stages: tuple = ("time_step", "advance", "predictor", "corrector", "surface_integral", "interface_flux",
                      "source", "limit", "evaluate_points", "check")
     picard: PicardStats = field(default_factory=PicardStats, init=False)
 
@@ -439,22 +438,22 @@ class ADERDGFEM(DGFEM):
     def surface_integral(self, u_hat, q_hat, time, dt, R):
         """-int Phi sum_s w_s F_N*(tau_s) over all faces added to R; returns the boundary work. One
         compiled pass over the interior faces for every time node (`ader_kernels`), one over the
-        boundary faces (`boundary_flux`, each node's conditions at its time)."""
+        boundary faces (`boundary_pass`, each node's conditions at its time), both in one loop
+        over the threads (`interface_flux`)."""
         nc = u_hat.shape[-1]
         f, b = self.interior, self.boundary
         T_L, T_R, T_B = self.traces
         flux = np.empty((len(f), nc))
-        bad = interior_flux_sum(T_L, T_R, u_hat, q_hat, self.face_rho[0], self.face_rho[1], f.normal,
-                                self.face_material[0], self.face_material[1], *self.laws, self.w_tau, flux)
-        if bad >= 0:
-            _not_hyperbolic(bad)
+        interior = interior_flux_sum(T_L, T_R, u_hat, q_hat, self.face_rho[0], self.face_rho[1], f.normal,
+                                     self.face_material[0], self.face_material[1], *self.laws, self.w_tau, flux)
+        boundary, (flux_bnd, t_s, v_s) = self.boundary_pass(T_B, u_hat, q_hat, time + self.tau * dt, self.w_tau)
+        self.interface_flux(interior, boundary)
         f.integrate_jump(flux, R)
         if not len(b):
             return 0.0
-        flux, powers = self.boundary_flux(T_B, u_hat, q_hat, time + self.tau * dt, self.w_tau)
-        b.integrate(flux, "L", R, sign=-1.0)
+        b.integrate(flux_bnd, "L", R, sign=-1.0)
         work = 0.0
-        for w, power in zip(self.w_tau, powers):
+        for w, power in zip(self.w_tau, self.boundary_powers(t_s, v_s)):
             work += w * dt * power
         return work
 

@@ -37,7 +37,7 @@ class ADERDGMPM(ADERDGFEM):
     particles_in: object = None
     mls_order: int = -1
     backmap: str = "pic"
-    stages: tuple = ("project_particles", "time_step", "predictor", "corrector", "surface_integral", "boundary_flux",
+    stages: tuple = ("project_particles", "time_step", "predictor", "corrector", "surface_integral", "interface_flux",
                      "source", "limit", "back_map", "constitutive_update", "check")
 
     def __post_init__(self):

@@ -21,10 +21,10 @@ from .kernel_cache import kernel_factory, scratch
 def interior_flux_sum(T_L, T_R, u_hat, q_hat, rho_L, rho_R, N, mat_L, mat_R, laws, params, weights, flux):
     """flux[f] = sum_s weights[s] F_N(Q*[s, f]) for every interior row f (flux (nf, nc)), both
     sides traced from the predictor (u_hat, q_hat) at each node; mat_L, mat_R (nf,) material of
-    each side, (laws, params) the law table. Returns the first row that is not hyperbolic, or -1."""
-    return parallel.chunked(len(N), _interior_flux_sum(N.shape[1], only_law(laws)), "ccwwrrrrrwwwr",
-                            (T_L, T_R, u_hat, q_hat, rho_L, rho_R, N, mat_L, mat_R, laws, params, weights, flux),
-                            "first")
+    each side, (laws, params) the law table. Returns the pass (a `parallel.Pass`, to run with the
+    boundary's: `parallel.together`), which returns the first row that is not hyperbolic, or -1."""
+    return parallel.Pass(len(N), _interior_flux_sum(N.shape[1], only_law(laws)), "ccwwrrrrrwwwr",
+                         (T_L, T_R, u_hat, q_hat, rho_L, rho_R, N, mat_L, mat_R, laws, params, weights, flux), "first")
 
 
 @kernel_factory

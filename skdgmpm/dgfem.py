@@ -120,7 +120,7 @@ class DGFEM(GodunovScheme):
     order: int = 1
     cfl: float = 0.5
     integrator: str = "rk2"
-    stages: tuple = ("time_step", "advance", "gauss_state", "boundary_flux", "interface_flux", "volume_flux", "source",
+    stages: tuple = ("time_step", "advance", "gauss_state", "interface_flux", "volume_flux", "source",
                      "limit", "evaluate_points", "check")
     external_work: float = field(default=0.0, init=False)
     transverse: str = "none"
@@ -214,42 +214,55 @@ class DGFEM(GodunovScheme):
     history_n = None          # (n_gauss, n_history) internal variables of the step's t_n
 
     # ---------------------------------------------------------------- stages
-    @stage
-    def interface_flux(self, grid_state):
-        """(e) Godunov fluxes at the interior facet points (nf, nc): one compiled pass from the dofs
-        (`riemann.trace_fluxes`: traces, law, tangents, Riemann problem), no face array kept."""
+    def interior_pass(self, grid_state):
+        """The interior facet points' Godunov fluxes (nf, nc): their pass from the dofs
+        (`riemann.trace_fluxes`: traces, law, tangents, Riemann problem, no face array kept; a
+        `parallel.Pass`, run by `interface_flux`) and the array it fills."""
         f = self.interior
         mat_L, mat_R, rho_L, rho_R, T_L, T_R = self.interior_sides
+        flux = np.empty((len(f), grid_state.U.shape[1]))
         return trace_fluxes(T_L, T_R, grid_state.U, grid_state.Q, rho_L, rho_R, f.normal, mat_L, mat_R, *self.laws,
-                            np.empty((len(f), grid_state.U.shape[1])))
+                            flux), flux
 
-    @stage
-    def boundary_flux(self, T, u, q, times, weights):
-        """(d) The boundary facet points' fluxes under their conditions [R18 §4.5], sum_s weights[s]
+    def boundary_pass(self, T, u, q, times, weights):
+        """The boundary facet points' fluxes under their conditions [R18 §4.5], sum_s weights[s]
         F_N(t*, v*) (nb, nc), from the states u, q (S, n, nc) at the times ``times`` (S,) through
-        the trace T (`riemann.boundary_fluxes`: one compiled pass, trace, law, tangent, ghost
-        state, flux; q None: the law at the trace of u), and the power through the boundary at each
-        time (W, a list of S)."""
+        the trace T: their pass (`riemann.boundary_fluxes`: trace, law, tangent, ghost state,
+        flux; q None: the law at the trace of u; a `parallel.Pass`, run by `interface_flux`) and
+        the arrays it fills, (flux, t*, v*), t*, v* (S, nb, d) (`boundary_powers`)."""
         b, g = self.boundary, self.ghosts
         material, rho, _ = self.boundary_side
         S, nb, d = len(times), len(b), self.d
         flux, t_s, v_s = np.empty((nb, d * d + d)), np.empty((S, nb, d)), np.empty((S, nb, d))
         values = np.stack([g.values_at(t) for t in times])
-        bad = boundary_fluxes(T, u, q, rho, b.normal, material, *self.laws, (g.frame, g.velocity, g.copy), values,
-                              np.asarray(weights, dtype=float), flux, t_s, v_s)
-        if bad >= 0:
-            _not_hyperbolic(bad)
-        return flux, [boundary_power(b.measure, t_s[s], v_s[s]) for s in range(S)]
+        return boundary_fluxes(T, u, q, rho, b.normal, material, *self.laws, (g.frame, g.velocity, g.copy), values,
+                               np.asarray(weights, dtype=float), flux, t_s, v_s), (flux, t_s, v_s)
+
+    def boundary_powers(self, t_s, v_s):
+        """The power through the boundary (W) at each time node of `boundary_pass`, a list."""
+        return [boundary_power(self.boundary.measure, t_s[s], v_s[s]) for s in range(len(t_s))]
+
+    @stage
+    def interface_flux(self, interior, boundary):
+        """(d)-(e) The Godunov fluxes of the interior and boundary facet points: their passes
+        (`interior_pass`, `boundary_pass`, or ADER's over its time nodes) in one loop over the
+        threads (`parallel.together`). Stops at the first face that is not hyperbolic."""
+        for first in parallel.together(interior, boundary):
+            if first >= 0:
+                _not_hyperbolic(first)
 
     def surface_residual(self, grid_state, time):
         """-int Phi F_N* over all faces, and the power through the boundary (W): the interior
-        faces' Godunov fluxes and the boundary's, each one pass from the dofs."""
+        faces' Godunov fluxes and the boundary's, each one pass from the dofs, both in one loop
+        over the threads (`interface_flux`)."""
         T_B = self.boundary_side[2]
         Q = None if grid_state.Q is None else grid_state.Q[None]
-        flux_bnd, (power,) = self.boundary_flux(T_B, grid_state.U[None], Q, (time,), (1.0,))
-        R = self.interior.integrate_jump(self.interface_flux(grid_state))      # side R minus side L, one pass
+        interior, flux = self.interior_pass(grid_state)
+        boundary, (flux_bnd, t_s, v_s) = self.boundary_pass(T_B, grid_state.U[None], Q, (time,), (1.0,))
+        self.interface_flux(interior, boundary)
+        R = self.interior.integrate_jump(flux)      # side R minus side L, one pass
         self.boundary.integrate(flux_bnd, "L", R, sign=-1.0)
-        return R, power
+        return R, self.boundary_powers(t_s, v_s)[0]
 
     @stage("volume_flux")
     def volume_flux_points(self, Q):

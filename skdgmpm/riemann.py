@@ -246,14 +246,13 @@ def trace_fluxes(T_L, T_R, U, Q, rho_L, rho_R, N, mat_L, mat_R, laws, params, fl
     face array: each side's Q is the law (mat_L, mat_R (nf,) into the table laws, params) at the
     trace of U with densities rho_L, rho_R (nf,), or, if Q (n_dofs, nc) is given, its trace (a
     law with history, which lives at the points only); the tangent at the trace of F. The same
-    numbers as `godunov_fluxes` on the traced face states, bit for bit."""
+    numbers as `godunov_fluxes` on the traced face states, bit for bit. Returns the pass (a
+    `parallel.Pass`, to run with the boundary's: `parallel.together`), which returns the first
+    face that is not hyperbolic, or -1."""
     kernel = _trace_fluxes(N.shape[1], int(Q is not None), only_law(laws))
     Q = U if Q is None else Q
-    bad = parallel.chunked(len(N), kernel, "ccwwrrrrrwwr", (T_L, T_R, U, Q, rho_L, rho_R, N, mat_L, mat_R, laws, params,
-                                                          flux), "first")
-    if bad >= 0:
-        _not_hyperbolic(bad)
-    return flux
+    return parallel.Pass(len(N), kernel, "ccwwrrrrrwwr", (T_L, T_R, U, Q, rho_L, rho_R, N, mat_L, mat_R, laws, params,
+                                                         flux), "first")
 
 
 def boundary_fluxes(T, u, q, rho, N, material, laws, params, ghosts, values, weights, flux, t_s, v_s):
@@ -266,12 +265,12 @@ def boundary_fluxes(T, u, q, rho, N, material, laws, params, ghosts, values, wei
     ghost state (`bcs.ghost_face`; ``ghosts`` = `BoundaryGhosts`'s (frame, imposes velocity,
     copies the interior), ``values`` (S, nf, d) the imposed values at each node's time). One
     compiled pass on the threads, each row written by one chunk: the same bits for any thread
-    count. Returns the first row whose acoustic tensor is not positive definite, or -1."""
+    count. Returns the pass (a `parallel.Pass`), which returns the first row whose acoustic
+    tensor is not positive definite, or -1."""
     kernel = _boundary_fluxes(N.shape[1], int(q is not None), only_law(laws))
     q = u if q is None else q
-    return parallel.chunked(len(N), kernel, "lh" + "w" * 14, (T, u, q, rho, N, material, laws, params, ghosts, values,
-                                                             weights, flux, t_s, v_s), "first",
-                            max(1, parallel.MIN_ROWS // 8))
+    return parallel.Pass(len(N), kernel, "lh" + "w" * 14, (T, u, q, rho, N, material, laws, params, ghosts, values,
+                                                          weights, flux, t_s, v_s), "first", max(1, parallel.MIN_ROWS // 8))
 
 
 def transverse_positive(w_F, w_p, C, n, rho0):

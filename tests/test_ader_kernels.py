@@ -32,8 +32,8 @@ def test_interior_pass_is_the_time_weighted_godunov_flux(case):
     q_hat = rng.standard_normal((n_t, n_points, nc)) * np.r_[1e8 * np.ones(d * d), np.ones(d)]
     f = st.interior
     flux = np.empty((len(f), nc))
-    assert interior_flux_sum(*st.traces[:2], u_hat, q_hat, *st.face_rho[:2], f.normal, *st.face_material[:2],
-                             *st.laws, st.w_tau, flux) == -1
+    assert parallel.chunked(*interior_flux_sum(*st.traces[:2], u_hat, q_hat, *st.face_rho[:2], f.normal,
+                                               *st.face_material[:2], *st.laws, st.w_tau, flux)) == -1
     expected = np.zeros_like(flux)
     for s in range(n_t):
         sides = []
@@ -64,7 +64,7 @@ def _every_condition(st):
 
 @pytest.mark.parametrize("case", BOUNDARY_CASES)
 def test_boundary_pass_is_the_time_weighted_ghost_flux(case, monkeypatch):
-    """`riemann.boundary_fluxes` (through the stepper's `boundary_flux`) against the batched path,
+    """`riemann.boundary_fluxes` (the stepper's `boundary_pass`, run alone) against the batched path,
     every kind of condition on the faces, the nodes' times on both sides of a release and along a
     ramp; ADER from its predictor (u_hat, q_hat), RK-DGFEM from its dofs with the law at the trace.
     The same bits on one thread and three (chunks of 2 rows)."""
@@ -87,7 +87,9 @@ def test_boundary_pass_is_the_time_weighted_ghost_flux(case, monkeypatch):
     for threads in (1, 3):
         previous = parallel.set_threads(threads)
         try:
-            made.append(st.boundary_flux(T_B, u, q, times, weights))
+            run, (flux, t_s, v_s) = st.boundary_pass(T_B, u, q, times, weights)
+            assert parallel.chunked(*run) == -1
+            made.append((flux, st.boundary_powers(t_s, v_s)))
         finally:
             parallel.set_threads(previous)
     (flux, powers), (flux_3, powers_3) = made
