@@ -19,11 +19,12 @@ the time the boundary values are taken).
 The faces' terms depend on Delta t only through the factor of the CTU corrections and the
 boundary conditions' values at the step's middle: they are computed once per projected state
 (``fixed_terms``), and an attempt that the CFL guard repeats with a smaller Delta t reuses them
-while those values stay as they were (everything after the faces is redone). A stage of ``advance`` is one compiled pass over the nodes,
-U + dt M^-1 (volume term + interior faces), the volume term (c) sum_alpha K^alpha F_alpha(Q)
-computed row by row and the interior faces' integral gathered node by node in that pass (neither
-is stored), to which the boundary faces' terms are then added, weighted by dt M^-1 (no residual
-array). ``volume_flux`` remains as the stand-alone statement of (c).
+while those values stay as they were (everything after the faces is redone). A stage of
+``advance`` is one compiled pass over the nodes, U + dt M^-1 (volume term + interior faces),
+the volume term (c) sum_alpha K^alpha F_alpha(Q) computed row by row and the interior faces'
+integral gathered node by node in that pass (neither is stored), to which the boundary faces'
+terms are then added, weighted by dt M^-1 (no residual array). ``volume_flux`` remains as the
+stand-alone statement of (c).
 
 With forward Euler and one particle strictly inside every cell (R18's usual layout; ``layout``
 "auto", `DGMPM._cellwise`), (a), (c), (f) and (g) reduce exactly: the projection puts the
@@ -79,7 +80,8 @@ class DGMPM(GodunovScheme):
     body_force: object = None
     layout: str = "auto"
     particles_key: str = "particles"        # what the errors about the particles name (their scene key)
-    stages: tuple = ("project", "time_step", "advance", "interface_flux", "transverse_flux", "source", "nodal_state", "constitutive_update", "check")
+    stages: tuple = ("project", "time_step", "advance", "interface_flux", "transverse_flux", "source", "nodal_state",
+                     "constitutive_update", "check")
     external_work: float = field(default=0.0, init=False)
     _kept: tuple = field(default=None, init=False, repr=False)   # (projected state, (ghost values, its faces' terms))
     _work: dict = field(default_factory=dict, init=False, repr=False)    # `_buffer`'s arrays, by name
