@@ -333,8 +333,6 @@ class ADERDGFEM(DGFEM):
         `_face_traces` and ``gauss`` (n_gauss, n_points) to the Gauss points, folded into the volume
         term K_alpha = D_alpha^T gauss (F is linear in Q)."""
         self.traces = tuple((T.indptr, T.indices, T.data) for T in traces)
-        mat_L, mat_R, rho_L, rho_R = self.interior_sides[:4]          # DGFEM's, shared
-        self.face_material, self.face_rho = (mat_L, mat_R), (rho_L, rho_R)
         self.K = system.Stiffness(tuple((D.T @ gauss).tocsr() for D in self.D))
 
     # ---------------------------------------------------------------- predictor
@@ -444,8 +442,9 @@ class ADERDGFEM(DGFEM):
         f, b = self.interior, self.boundary
         T_L, T_R, T_B = self.traces
         flux = np.empty((len(f), nc))
-        interior = interior_flux_sum(T_L, T_R, u_hat, q_hat, self.face_rho[0], self.face_rho[1], f.normal,
-                                     self.face_material[0], self.face_material[1], *self.laws, self.w_tau, flux)
+        mat_L, mat_R, rho_L, rho_R = self.interior_sides[:4]          # DGFEM's sides of the interior faces
+        interior = interior_flux_sum(T_L, T_R, u_hat, q_hat, rho_L, rho_R, f.normal, mat_L, mat_R, *self.laws,
+                                     self.w_tau, flux)
         boundary, (flux_bnd, t_s, v_s) = self.boundary_pass(T_B, u_hat, q_hat, time + self.tau * dt, self.w_tau)
         self.interface_flux(interior, boundary)
         f.integrate_jump(flux, R)

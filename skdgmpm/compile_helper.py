@@ -277,7 +277,7 @@ def compile_step(scene, resumed=False, share="step"):
     pass), their checks and the step's law pass (`GodunovScheme.constitutive_update`,
     `DGFEM.evaluate_points`, `MPM.strain_stress`). Returns whether the step reached the law's
     pass."""
-    from . import dgfem, dgmpm, riemann
+    from . import dgmpm, riemann
     from .build import build
     from .constitutive import MaterialSet
     from .dgfem import DGFEM
@@ -302,8 +302,7 @@ def compile_step(scene, resumed=False, share="step"):
 
     GodunovScheme.at_rest, MaterialSet.stress_update, GodunovScheme.check = at_rest, stress_update, check
     GodunovScheme.constitutive_update = DGFEM.evaluate_points = MPM.strain_stress = law_pass
-    for module in (dgfem, dgmpm, riemann):           # placeholder states need not be hyperbolic
-        module._not_hyperbolic = lambda face: None
+    riemann._not_hyperbolic = lambda face: None      # placeholder states need not be hyperbolic (every face pass)
     if share != "step":
         _split_faces(dgmpm, share, fill)
     disc = build(scene)

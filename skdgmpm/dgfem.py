@@ -27,7 +27,7 @@ from .integrators import base_entry, base_parts
 from .kernel_cache import kernel_factory, scratch
 from .limiter import SlopeLimiter
 from .particles import Particles
-from .riemann import _not_hyperbolic, boundary_fluxes, trace_fluxes
+from .riemann import boundary_fluxes, face_passes, trace_fluxes
 from .scheme import GodunovScheme, GridState, ParticleState, boundary_power, stage
 
 INTEGRATORS = ("rk2", "rk4")        # Euler is unstable for DG of degree >= 1
@@ -246,10 +246,8 @@ class DGFEM(GodunovScheme):
     def interface_flux(self, interior, boundary):
         """(d)-(e) The Godunov fluxes of the interior and boundary facet points: their passes
         (`interior_pass`, `boundary_pass`, or ADER's over its time nodes) in one loop over the
-        threads (`parallel.together`). Stops at the first face that is not hyperbolic."""
-        for first in parallel.together(interior, boundary):
-            if first >= 0:
-                _not_hyperbolic(first)
+        threads (`riemann.face_passes`). Stops at the first face that is not hyperbolic."""
+        face_passes(interior, boundary)
 
     def surface_residual(self, grid_state, time):
         """-int Phi F_N* over all faces, and the power through the boundary (W): the interior

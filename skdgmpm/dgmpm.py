@@ -50,7 +50,7 @@ from .errors import InputError
 from .faces import interior_faces
 from .integrators import INTEGRATORS
 from .quadrature import ParticleMap, particle_operators
-from .riemann import _not_hyperbolic
+from .riemann import face_passes
 from .scheme import GodunovScheme, GridState, cell_values, stage
 
 
@@ -347,7 +347,7 @@ class DGMPM(GodunovScheme):
         reads them, (nf, sides, nc) (`dgmpm_kernels.face_corrections`: the parts both cells send,
         the gathered correction, or none for DCU), the boundary faces' corrections per unit Delta
         t (nb, nc), fluxes (nb, nc) and stationary states (nb, d). Both kinds of faces in one
-        pass over the threads (`parallel.together`), but where a cell may be unrecorded (the
+        pass over the threads (`riemann.face_passes`), but where a cell may be unrecorded (the
         trace path, whose kernels two compile helpers share out: `skdgmpm.compile_helper`)."""
         f, nc = self.interior, grid_state.U.shape[1]
         ctu = self.ctu is not None
@@ -379,13 +379,7 @@ class DGMPM(GodunovScheme):
                                  self.cell_material, *laws, (rec, state, normals, k_L, k_R, recorded, self.trace_path),
                                  ctu, (h_L, n_L), (h_R, n_R), flux, G)
         boundary, (flux_b, t_s, v_s, parts) = self.boundary_pass(grid_state, time)
-        if self.trace_path:
-            bad, bad_b = parallel.chunked(*interior), parallel.chunked(*boundary)
-        else:
-            bad, bad_b = parallel.together(interior, boundary)
-        for first in (bad, bad_b):
-            if first >= 0:
-                _not_hyperbolic(first)
+        face_passes(interior, boundary, together=not self.trace_path)
         if ctu and recorded:
             sources, scale, signs = self.cell_sources
             W = G.reshape(-1, nc)

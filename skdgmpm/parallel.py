@@ -31,6 +31,10 @@ and kernels: the same bits. Every pass of a step goes one way, so that numba's w
 which spin a while, never hold a core that a worker of the pool needs; the pool runs them where
 numba's layer is another (`rows`), and the bench's probes.
 
+Two passes that do not read what the other writes may share one compiled loop (`together`, each
+described as a `Pass`): their chunks taken from one counter, the first pass's first, so that the
+second (a few hundred boundary faces beside the interior faces) waits for no start of its own.
+
 The thread count: `set_threads` (the scene key ``run.threads``, ``skdgmpm run --threads``), else
 $SKDGMPM_THREADS, else every core this process may use. A loop shorter than `MIN_ROWS` per thread
 runs in the calling thread (small scenes pay nothing); study workers run one thread each.
@@ -315,9 +319,7 @@ def chunked(n, kernel, spec, args, returns=0, min_rows=None):
         except _Mismatch:               # the arguments nest otherwise than last time: planned anew
             plan = None
     if bounds is None or plan is None:
-        parsed = _parsed(spec)
-        if sum(letter not in ("l", "h") for letter in parsed) != len(args):
-            raise ValueError(f"chunked: spec {spec!r} for {len(args)} arguments")
+        parsed = _checked(spec, args)
     if bounds is None:
         parts = chunks(n, min_rows)
         number = {lo: c for c, (lo, _) in enumerate(parts)}
@@ -331,6 +333,14 @@ def chunked(n, kernel, spec, args, returns=0, min_rows=None):
     out = np.empty((len(bounds) - 1, width))
     plan[0](bounds, out, *flat)
     return _returned(out, returns)
+
+
+def _checked(spec, args):
+    """``spec`` parsed (`_parsed`), refused where it does not take as many arguments as ``args``."""
+    parsed = _parsed(spec)
+    if sum(letter not in ("l", "h") for letter in parsed) != len(args):
+        raise ValueError(f"chunked: spec {spec!r} for {len(args)} arguments")
+    return parsed
 
 
 def _returned(out, returns):
@@ -377,8 +387,7 @@ def together(first, second):
         plan = None
     if plan is None:
         for p in (first, second):
-            if sum(letter not in ("l", "h") for letter in _parsed(p.spec)) != len(p.args):
-                raise ValueError(f"chunked: spec {p.spec!r} for {len(p.args)} arguments")
+            _checked(p.spec, p.args)
         names = [_loop_key(p.kernel, p.spec, p.args, p.returns) for p in (first, second)]
         plan = _PAIR_PLANS[key] = (_pair_loop(*names), *(_flattener(_CHUNK_KERNELS[k][2]) for k in names))
         flat = (plan[1](first.args), plan[2](second.args))
@@ -387,7 +396,7 @@ def together(first, second):
     return _returned(outs[0], first.returns), _returned(outs[1], second.returns)
 
 
-_PAIR_PLANS = {}        # the two passes' (kernel, spec, returns) -> (their compiled loop, the flatteners of their arguments)
+_PAIR_PLANS = {}        # both passes' (kernel, spec, returns) -> (their compiled loop, their arguments' flatteners)
 
 
 class _Mismatch(Exception):

@@ -24,6 +24,17 @@ def _not_hyperbolic(face):
     raise InstabilityError(f"loss of hyperbolicity: acoustic tensor not positive definite at face {face}")
 
 
+def face_passes(interior, boundary, together=True):
+    """Run a scheme's interior and boundary faces' passes (each a `parallel.Pass` returning its
+    first face that is not hyperbolic, or -1) in one loop over the threads (`parallel.together`),
+    or one after the other; stop at the first such face, the interior's first."""
+    found = (parallel.together(interior, boundary) if together else
+             (parallel.chunked(*interior), parallel.chunked(*boundary)))
+    for first in found:
+        if first >= 0:
+            _not_hyperbolic(first)
+
+
 # ---------------------------------------------------------------- loops over faces
 # One kernel per literal d (`skdgmpm.kernel_cache.kernel_factory`): the compiler unrolls every
 # (d, d) loop of the point functions it inlines and drops the other dimensions' branches.
@@ -270,7 +281,8 @@ def boundary_fluxes(T, u, q, rho, N, material, laws, params, ghosts, values, wei
     kernel = _boundary_fluxes(N.shape[1], int(q is not None), only_law(laws))
     q = u if q is None else q
     return parallel.Pass(len(N), kernel, "lh" + "w" * 14, (T, u, q, rho, N, material, laws, params, ghosts, values,
-                                                          weights, flux, t_s, v_s), "first", max(1, parallel.MIN_ROWS // 8))
+                                                          weights, flux, t_s, v_s), "first",
+                         max(1, parallel.MIN_ROWS // 8))
 
 
 def transverse_positive(w_F, w_p, C, n, rho0):

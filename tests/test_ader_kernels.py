@@ -32,12 +32,13 @@ def test_interior_pass_is_the_time_weighted_godunov_flux(case):
     q_hat = rng.standard_normal((n_t, n_points, nc)) * np.r_[1e8 * np.ones(d * d), np.ones(d)]
     f = st.interior
     flux = np.empty((len(f), nc))
-    assert parallel.chunked(*interior_flux_sum(*st.traces[:2], u_hat, q_hat, *st.face_rho[:2], f.normal,
-                                               *st.face_material[:2], *st.laws, st.w_tau, flux)) == -1
+    mat_L, mat_R, rho_L, rho_R = st.interior_sides[:4]
+    assert parallel.chunked(*interior_flux_sum(*st.traces[:2], u_hat, q_hat, rho_L, rho_R, f.normal, mat_L, mat_R,
+                                               *st.laws, st.w_tau, flux)) == -1
     expected = np.zeros_like(flux)
     for s in range(n_t):
         sides = []
-        for (indptr, indices, data), material, rho in zip(st.traces[:2], st.face_material, st.face_rho):
+        for (indptr, indices, data), material, rho in zip(st.traces[:2], (mat_L, mat_R), (rho_L, rho_R)):
             T = sp.csr_matrix((data, indices, indptr), shape=(len(indptr) - 1, n_points))
             F = (T @ u_hat[s])[:, : d * d].reshape(-1, d, d)
             sides += [T @ q_hat[s], st.materials.tangent(F, material), rho]
