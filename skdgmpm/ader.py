@@ -299,7 +299,7 @@ class ADERDGFEM(DGFEM):
     picard_max: int = 0                     # 0: `default_picard_max`
     picard_guess: str = "taylor"            # or "constant" (u_hat = U^n at every time node)
     stages: tuple = ("time_step", "advance", "predictor", "corrector", "surface_integral", "interface_flux",
-                     "source", "limit", "evaluate_points", "check")
+                     "source", "cell_update", "limit", "evaluate_points", "check")
     picard: PicardStats = field(default_factory=PicardStats, init=False)
 
     def __post_init__(self):
@@ -426,18 +426,23 @@ class ADERDGFEM(DGFEM):
         face states (tangent, Riemann problem) are taken at every node."""
         n_t, nc = len(self.tau), dofs.shape[1]
         u_hat, q_hat = u_hat.reshape(n_t, -1, nc), q_hat.reshape(n_t, -1, nc)
-        R = system.volume_flux(q_sum.reshape(-1, nc), self.K)
-        work = self.surface_integral(u_hat, q_hat, time, dt, R)
-        if source is not None:
-            R += self.source_integral(_time_sum(self.w_tau, source))
-        return self.limit(self.mass_update(dofs, dt, R)), work
+        faces, work = self.surface_integral(u_hat, q_hat, time, dt)
+        S = None if source is None else self.source_integral(_time_sum(self.w_tau, source))
+        return self.limit(self.cell_update(dofs, dt, faces, q_sum.reshape(-1, nc), S)), work
+
+    volume_first = True         # the corrector's residual: the volume term, then the faces' (`cell_update`)
+
+    @property
+    def volume_stiffness(self):
+        """The volume term's K^alpha over the predictor's points (`system.Stiffness`)."""
+        return self.K
 
     @stage
-    def surface_integral(self, u_hat, q_hat, time, dt, R):
-        """-int Phi sum_s w_s F_N*(tau_s) over all faces added to R; returns the boundary work. One
-        compiled pass over the interior faces for every time node (`ader_kernels`), one over the
-        boundary faces (`boundary_pass`, each node's conditions at its time), both in one loop
-        over the threads (`interface_flux`)."""
+    def surface_integral(self, u_hat, q_hat, time, dt):
+        """The faces' fluxes of -int Phi sum_s w_s F_N*(tau_s) as `cell_update` reads them
+        (`faces_read`), and the boundary work. One compiled pass over the interior faces for every
+        time node (`ader_kernels`), one over the boundary faces (`boundary_pass`, each node's
+        conditions at its time), both in one loop over the threads (`interface_flux`)."""
         nc = u_hat.shape[-1]
         f, b = self.interior, self.boundary
         T_L, T_R, T_B = self.traces
@@ -447,14 +452,11 @@ class ADERDGFEM(DGFEM):
                                      self.w_tau, flux)
         boundary, (flux_bnd, t_s, v_s) = self.boundary_pass(T_B, u_hat, q_hat, time + self.tau * dt, self.w_tau)
         self.interface_flux(interior, boundary)
-        f.integrate_jump(flux, R)
-        if not len(b):
-            return 0.0
-        b.integrate(flux_bnd, "L", R, sign=-1.0)
         work = 0.0
-        for w, power in zip(self.w_tau, self.boundary_powers(t_s, v_s)):
-            work += w * dt * power
-        return work
+        if len(b):
+            for w, power in zip(self.w_tau, self.boundary_powers(t_s, v_s)):
+                work += w * dt * power
+        return self.faces_read(flux, flux_bnd), work
 
     @stage
     def advance(self, U, time, dt, U_points, Q_points):

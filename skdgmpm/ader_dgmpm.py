@@ -38,7 +38,7 @@ class ADERDGMPM(ADERDGFEM):
     mls_order: int = -1
     backmap: str = "pic"
     stages: tuple = ("project_particles", "time_step", "predictor", "corrector", "surface_integral", "interface_flux",
-                     "source", "limit", "back_map", "constitutive_update", "check")
+                     "source", "cell_update", "limit", "back_map", "constitutive_update", "check")
 
     def __post_init__(self):
         if self.backmap not in BACKMAPS:

@@ -25,62 +25,134 @@ from .errors import InputError
 from .faces import interior_faces
 from .integrators import base_entry, base_parts
 from .kernel_cache import kernel_factory, scratch
+from .parallel import csr_row_add
 from .limiter import SlopeLimiter
 from .particles import Particles
 from .riemann import boundary_fluxes, face_passes, trace_fluxes
 from .scheme import GodunovScheme, GridState, ParticleState, boundary_power, stage
+from .system import volume_row
 
 INTEGRATORS = ("rk2", "rk4")        # Euler is unstable for DG of degree >= 1
 
 
-def _apply_blocks(blocks, cell_dofs, R, out, R2=None, base=None, step=1.0):
+def _apply_blocks(blocks, cell_dofs, R, out):
     """out[dofs of c] = blocks[c] @ R[dofs of c] for every cell c: blocks (nel, nb, nb), cell_dofs
     (nel, nb), R and out (n_dofs, nc) (a compiled loop: numpy's batched matmul on a gathered copy
-    cost ~4 ms a call at 128^2). With ``R2``, R + R2 in place of R, and with ``base`` (an array
-    or an integrator's `Combination`, formed here entry by entry), base + step * (...): an explicit
-    stage's sum and update in the same pass, entry by entry the operations of numpy's ``base +
-    step * (blocks @ (R + R2))``."""
+    cost ~4 ms a call at 128^2). A stage's update applies its blocks where it forms R
+    (`cell_update`)."""
     nb, nc = blocks.shape[1], R.shape[1]
     literal = nc == 6 and nb in (4, 9)      # Q1, Q2 in 2D: literal sizes, the loops unrolled
-    kernel = _apply_blocks_kernel(nb if literal else None, nc if literal else None, int(R2 is not None),
-                                  int(base is not None))
-    R2 = R if R2 is None else R2
-    kind, bases = base_parts(R if base is None else base)
-    parallel.chunked(len(blocks), kernel, "rrwww(wwww)ww", (blocks, cell_dofs, R, R2, kind, bases, float(step), out))
+    kernel = _apply_blocks_kernel(nb if literal else None, nc if literal else None)
+    kind, bases = base_parts(R)             # not read: no update
+    parallel.chunked(len(blocks), kernel, "rrww(wwww)w", (blocks, cell_dofs, R, kind, bases, out))
 
 
 @kernel_factory
-def _apply_blocks_kernel(nb, nc, two, update):      # two, update: 0 or 1 (R2 added, base + step * ...)
+def _apply_blocks_kernel(nb, nc):
     if nb is None:                      # sizes read at run time (1D; P >= 3, whose rows outgrow the stack scratch)
-        def apply_blocks(blocks, cell_dofs, R, R2, kind, bases, step, out):
-            x = np.empty((blocks.shape[1], R.shape[1]))
-            _apply_blocks_n(blocks, cell_dofs, R, R2, kind, bases, step, out, x, blocks.shape[1], R.shape[1], two,
-                            update)
+        def apply_blocks(blocks, cell_dofs, R, kind, bases, out):
+            _apply_blocks_n(blocks, cell_dofs, R, kind, bases, out, np.empty((blocks.shape[1], R.shape[1])),
+                            blocks.shape[1], R.shape[1])
     else:
-        def apply_blocks(blocks, cell_dofs, R, R2, kind, bases, step, out):
-            _apply_blocks_n(blocks, cell_dofs, R, R2, kind, bases, step, out, scratch((nb, nc)), nb, nc, two, update)
+        def apply_blocks(blocks, cell_dofs, R, kind, bases, out):
+            _apply_blocks_n(blocks, cell_dofs, R, kind, bases, out, scratch((nb, nc)), nb, nc)
     return apply_blocks
 
 
 @njit(cache=True, inline="always")
-def _apply_blocks_n(blocks, cell_dofs, R, R2, kind, bases, step, out, x, nb, nc, two, update):
-    """Each cell's rows of R (+ R2) gathered into ``x`` (nb, nc) before its rows of ``out`` are
-    written: the compiler cannot tell ``out`` from the arrays it reads and, reading them in place,
-    loads them again after every store (the pass x3-4 slower on one thread, where
-    `parallel.chunked` calls it from Python). On the stack (the literal sizes) ``x`` stays in
-    registers. The operations of the sum in place, in the same order."""
+def _apply_blocks_n(blocks, cell_dofs, R, kind, bases, out, x, nb, nc):
+    """Each cell's rows of R gathered into ``x`` (nb, nc) before its rows of ``out`` are written:
+    the compiler cannot tell ``out`` from the arrays it reads and, reading them in place, loads
+    them again after every store (the pass x3-4 slower on one thread, where `parallel.chunked`
+    calls it from Python). On the stack (the literal sizes) ``x`` stays in registers."""
     for c in range(len(blocks)):
         for m in range(nb):
             r = cell_dofs[c, m]
             for j in range(nc):
-                x[m, j] = (R[r, j] + R2[r, j]) if two else R[r, j]
-        for k in range(nb):
-            i = cell_dofs[c, k]
+                x[m, j] = R[r, j]
+        _block_rows(blocks, cell_dofs, c, x, kind, bases, 1.0, out, nb, nc, False)
+
+
+@njit(cache=True, inline="always")
+def _block_rows(blocks, cell_dofs, c, x, kind, bases, step, out, nb, nc, update):
+    """Cell c's rows of out: blocks[c] @ x (x (nb, nc) the cell's rows of the right-hand side), or
+    with ``update`` base + step * (...), base's entries formed as read (`integrators.base_entry`)."""
+    for k in range(nb):
+        i = cell_dofs[c, k]
+        for j in range(nc):
+            s = 0.0
+            for m in range(nb):
+                s += blocks[c, k, m] * x[m, j]
+            out[i, j] = base_entry(kind, bases, i, j) + step * s if update else s
+
+
+def cell_update(blocks, cell_dofs, faces, Q, stiffness, source, base, step, volume_first):
+    """base + step M^-1 R in one pass over the cells, each row of R = volume + surface (+ source)
+    formed where the cell's block reads it, none stored: M^-1 per cell (blocks (nel, nb, nb),
+    cell_dofs (nel, nb)); the surface term as `faces.FaceSet.integrate_jump` and the boundary's
+    `integrate` (sign -1) sum it, ``faces`` = (interior gather (a CSR triple, n_dofs rows), the
+    interior facet points' measures, their fluxes, boundary gather, measures, fluxes); the volume
+    term as `system.volume_flux` sums it (Q at the points, a `system.Stiffness`); ``source`` the
+    source term's rows or None. The terms are added in the order each method's sum takes:
+    ``volume_first`` (ADER's corrector) volume, interior, boundary, else (RK) interior, boundary,
+    then the volume; then the source. Entry by entry the operations of those passes and of
+    `_apply_blocks`: the same bits as R stored and read back, without its 4-6 passes over memory.
+    ``base``: an array or an integrator's `Combination`. Rows of a cell in parallel chunks of cells."""
+    nb, nc = blocks.shape[1], Q.shape[1]
+    d = {2: 1, 6: 2, 12: 3}[nc]
+    kernel = _cell_update(nb if d == 2 and nb in (4, 9) else None, d, int(volume_first), int(source is not None))
+    kind, bases = base_parts(base)
+    out = np.empty((stiffness.shape[0], nc))
+    source = np.empty((0, nc)) if source is None else source
+    parallel.chunked(len(blocks), kernel, "rr(www)ww(www)www(www)ww(wwww)ww",
+                     (blocks, cell_dofs, *faces, Q, tuple(stiffness), source, kind, bases, float(step), out))
+    return out
+
+
+@kernel_factory
+def _cell_update(nb, d, volume_first, sourced):   # nb literal (2D Q1, Q2: the loops unrolled) or None
+    nc = d * d + d
+    if nb is None:                      # sizes read at run time, as `_apply_blocks_kernel`'s
+        def cell_update(blocks, cell_dofs, interior, measure, flux, boundary, measure_b, flux_bnd, Q, stiffness,
+                        source, kind, bases, step, out):
+            _cell_update_n(blocks, cell_dofs, interior, measure, flux, boundary, measure_b, flux_bnd, Q, stiffness,
+                           source, kind, bases, step, out, np.empty((blocks.shape[1], nc)), blocks.shape[1], d,
+                           volume_first, sourced)
+    else:
+        def cell_update(blocks, cell_dofs, interior, measure, flux, boundary, measure_b, flux_bnd, Q, stiffness,
+                        source, kind, bases, step, out):
+            _cell_update_n(blocks, cell_dofs, interior, measure, flux, boundary, measure_b, flux_bnd, Q, stiffness,
+                           source, kind, bases, step, out, scratch((nb, nc)), nb, d, volume_first, sourced)
+    return cell_update
+
+
+@njit(cache=True, inline="always")
+def _cell_update_n(blocks, cell_dofs, interior, measure, flux, boundary, measure_b, flux_bnd, Q, stiffness, source,
+                   kind, bases, step, out, x, nb, d, volume_first, sourced):
+    """`cell_update`'s loop over the cells, x (nb, nc) a cell's rows of R."""
+    nc = d * d + d
+    u, o = scratch((nc,)), scratch((nc,))
+    for c in range(len(blocks)):
+        for m in range(nb):
+            r = cell_dofs[c, m]
             for j in range(nc):
-                s = 0.0
-                for m in range(nb):
-                    s += blocks[c, k, m] * x[m, j]
-                out[i, j] = base_entry(kind, bases, i, j) + step * s if update else s
+                u[j] = 0.0
+            if volume_first:
+                volume_row(Q, stiffness, r, u, d)
+            csr_row_add(interior, measure, flux, r, u, nc, True)
+            csr_row_add(boundary, measure_b, flux_bnd, r, u, nc, True)
+            if not volume_first:
+                for j in range(nc):
+                    o[j] = 0.0
+                volume_row(Q, stiffness, r, o, d)
+                for j in range(nc):
+                    u[j] = u[j] + o[j]
+            if sourced:
+                for j in range(nc):
+                    u[j] = u[j] + source[r, j]
+            for j in range(nc):
+                x[m, j] = u[j]
+        _block_rows(blocks, cell_dofs, c, x, kind, bases, step, out, nb, nc, True)
 
 
 def dg_element(d, order):
@@ -120,7 +192,7 @@ class DGFEM(GodunovScheme):
     order: int = 1
     cfl: float = 0.5
     integrator: str = "rk2"
-    stages: tuple = ("time_step", "advance", "gauss_state", "interface_flux", "volume_flux", "source",
+    stages: tuple = ("time_step", "advance", "gauss_state", "interface_flux", "source", "cell_update",
                      "limit", "evaluate_points", "check")
     external_work: float = field(default=0.0, init=False)
     transverse: str = "none"
@@ -190,12 +262,6 @@ class DGFEM(GodunovScheme):
         _apply_blocks(self.mass_inv, self.cell_dofs, R, out)
         return out
 
-    def mass_update(self, base, step, R, R2=None):
-        """base + step M^-1 R (R + R2 if given) in one pass over the cells, without M^-1 R stored."""
-        out = np.empty_like(R)
-        _apply_blocks(self.mass_inv, self.cell_dofs, R, out, R2, base, step)
-        return out
-
     def project(self, U_points):
         """L2 projection of point values onto the DG space (Gauss weights)."""
         return self.apply_mass_inverse(self.source_integral(U_points))
@@ -249,23 +315,39 @@ class DGFEM(GodunovScheme):
         threads (`riemann.face_passes`). Stops at the first face that is not hyperbolic."""
         face_passes(interior, boundary)
 
-    def surface_residual(self, grid_state, time):
-        """-int Phi F_N* over all faces, and the power through the boundary (W): the interior
-        faces' Godunov fluxes and the boundary's, each one pass from the dofs, both in one loop
-        over the threads (`interface_flux`)."""
+    def surface_fluxes(self, grid_state, time):
+        """The Godunov fluxes of the interior and boundary facet points, each one pass from the
+        dofs, both in one loop over the threads (`interface_flux`), as the surface term reads them
+        (`faces_read`), and the power through the boundary (W)."""
         T_B = self.boundary_side[2]
         Q = None if grid_state.Q is None else grid_state.Q[None]
         interior, flux = self.interior_pass(grid_state)
         boundary, (flux_bnd, t_s, v_s) = self.boundary_pass(T_B, grid_state.U[None], Q, (time,), (1.0,))
         self.interface_flux(interior, boundary)
-        R = self.interior.integrate_jump(flux)      # side R minus side L, one pass
-        self.boundary.integrate(flux_bnd, "L", R, sign=-1.0)
-        return R, self.boundary_powers(t_s, v_s)[0]
+        return self.faces_read(flux, flux_bnd), self.boundary_powers(t_s, v_s)[0]
 
-    @stage("volume_flux")
-    def volume_flux_points(self, Q):
-        """The volume term from Q at the Gauss points (n_points, ncomp)."""
-        return system.volume_flux(Q, self.K_points)
+    def faces_read(self, flux, flux_bnd):
+        """What `cell_update` reads of the faces: -int Phi F_N* over the interior faces (side R
+        minus side L, `faces.FaceSet.integrate_jump`) and over the boundary's (side L, sign -1) as
+        gathers per dof, with the facet points' measures and fluxes."""
+        f, b = self.interior, self.boundary
+        return f._gather(("R", "L"), 1.0), f.measure, flux, b._gather(("L",), -1.0), b.measure, flux_bnd
+
+    volume_first = False        # RK's residual: the faces' terms, then + the volume's (`cell_update`)
+
+    @stage
+    def cell_update(self, base, step, faces, Q, source=None):
+        """base + step M^-1 (volume + surface (+ source)) in one pass over the cells, the terms'
+        rows formed where M^-1 reads them (`dgfem.cell_update`): the volume term of Q at the
+        points of `volume_stiffness`, the faces' as `faces_read` gives them, source the source
+        term's rows or None."""
+        return cell_update(self.mass_inv, self.cell_dofs, faces, Q, self.volume_stiffness, source, base, step,
+                           self.volume_first)
+
+    @property
+    def volume_stiffness(self):
+        """The volume term's K^alpha over the Gauss points (`system.Stiffness`)."""
+        return self.K_points
 
     def source_integral(self, S):
         """int Phi S from values S (n_points, nc) at the Gauss points (Gauss quadrature): B^T (w S),
@@ -274,21 +356,17 @@ class DGFEM(GodunovScheme):
 
     def rate_update(self, U_dofs, base, step, time, U_points=None, Q_points=None):
         """base + step dU/dt, dU/dt = M^-1 (surface + volume terms + source), and the boundary
-        power: the terms' sum, M^-1 and the update in one pass over the cells (`mass_update`).
-        U_points, Q_points: U_dofs's values at the Gauss points and the law there, where known
-        (the state's, at the first stage)."""
+        power: the faces' pass, then the terms' sum, M^-1 and the update in one pass over the cells
+        (`cell_update`). U_points, Q_points: U_dofs's values at the Gauss points and the law there,
+        where known (the state's, at the first stage)."""
         if self.materials.n_history:     # the law at the Gauss points only, where the history is
             Q = self.gauss_state(U_dofs, U_points)
-            R, power = self.surface_residual(GridState(U_dofs, self.project(Q)), time)
+            faces, power = self.surface_fluxes(GridState(U_dofs, self.project(Q)), time)
         else:
-            R, power = self.surface_residual(GridState(U_dofs, None), time)
+            faces, power = self.surface_fluxes(GridState(U_dofs, None), time)
             Q = self.gauss_state(U_dofs, U_points) if Q_points is None else Q_points
-        V = self.volume_flux_points(Q)
-        if self.body_force is not None:     # (R + V) + S, in that order
-            R += V
-            R += self.source_integral(self.source(self.gauss, time))
-            V = None
-        return self.mass_update(base, step, R, V), power
+        source = None if self.body_force is None else self.source_integral(self.source(self.gauss, time))
+        return self.cell_update(base, step, faces, Q, source), power
 
     @stage
     def limit(self, dofs):

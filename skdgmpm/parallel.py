@@ -727,18 +727,27 @@ def _matmul(nc, scaled):                # nc: a literal width (None: read at run
         for r in range(len(indptr) - 1):
             for c in range(nc):
                 u[c] = out[r, c] if add else 0.0
-            for k in range(indptr[r], indptr[r + 1]):
-                j, w = indices[k], data[k]
-                if scaled:
-                    s = scale[j]
-                    for c in range(nc):
-                        u[c] += w * (s * X[j, c])
-                else:
-                    for c in range(nc):
-                        u[c] += w * X[j, c]
+            csr_row_add((indptr, indices, data), scale, X, r, u, nc, scaled)
             for c in range(nc):
                 out[r, c] = u[c]
     return matmul
+
+
+@njit(cache=True, inline="always")
+def csr_row_add(A, scale, X, r, u, nc, scaled):
+    """u[:nc] += row r of A diag(scale) X (A a CSR triple; ``scale`` read only if ``scaled``), in
+    CSR order: the sum `matmul` forms for each row, for a pass that uses the row where it is
+    formed (`dgfem.cell_update`)."""
+    indptr, indices, data = A
+    for k in range(indptr[r], indptr[r + 1]):
+        j, w = indices[k], data[k]
+        if scaled:
+            s = scale[j]
+            for c in range(nc):
+                u[c] += w * (s * X[j, c])
+        else:
+            for c in range(nc):
+                u[c] += w * X[j, c]
 
 
 class Transposed:

@@ -60,39 +60,93 @@ def test_bars_run_stably_for_every_order(scene, order):
     assert r.errors["P11"]["L1_rel"] < 0.1
 
 
-@pytest.mark.parametrize("nb, nc", [(4, 6), (9, 6), (16, 6), (3, 2)])   # Q1, Q2 (literal sizes), Q3 and 1D P2 (read at run time)
-@pytest.mark.parametrize("two, update", [(False, False), (True, True), (True, "mean"), (False, "rk4")])
-def test_mass_blocks_give_the_bits_of_the_row_by_row_sum(nb, nc, two, update):
-    """`_apply_blocks` (M^-1 R cell by cell; with R2 and base an explicit stage's update in the same
-    pass) against the sum written out in Python, term by term in the same order: the same bits.
-    The base an array, or RK2's mean and RK4's last base (`integrators.Combination`) formed in the
-    pass: the bits of numpy's combination (`integrators.formed`, the expressions the integrators
-    computed in passes of their own before). The cells' dofs are shuffled, so that a kernel that
-    wrote a cell's rows of ``out`` before it had read them all, or read another cell's, would
-    differ."""
+def _blocks_applied(blocks, cell_dofs, R, base=None, step=0.0):
+    """M^-1 R cell by cell, or base + step M^-1 R, written out in Python term by term in the
+    order the compiled passes sum them."""
+    out = np.empty_like(R)
+    n_cells, nb = cell_dofs.shape
+    for c in range(n_cells):
+        for k in range(nb):
+            for j in range(R.shape[1]):
+                s = 0.0
+                for m in range(nb):
+                    s += float(blocks[c, k, m]) * float(R[cell_dofs[c, m], j])
+                i = cell_dofs[c, k]
+                out[i, j] = s if base is None else float(base[i, j]) + step * s
+    return out
+
+
+SIZES = [(4, 6), (9, 6), (16, 6), (3, 2)]     # Q1, Q2 (literal sizes), Q3 and 1D P2 (read at run time)
+
+
+@pytest.mark.parametrize("nb, nc", SIZES)
+def test_mass_blocks_give_the_bits_of_the_row_by_row_sum(nb, nc):
+    """`_apply_blocks` (M^-1 R cell by cell) against the sum written out in Python: the same bits.
+    The cells' dofs are shuffled, so that a kernel that wrote a cell's rows of ``out`` before it
+    had read them all, or read another cell's, would differ."""
     from skdgmpm.dgfem import _apply_blocks
-    from skdgmpm.integrators import MEAN, RK4_BASE, Combination, formed
     rng = np.random.default_rng(nb * nc)
     n_cells = 7
     blocks = rng.standard_normal((n_cells, nb, nb))
     cell_dofs = rng.permutation(n_cells * nb).astype(np.int32).reshape(n_cells, nb)
-    R, R2, base, b, c, d = (rng.standard_normal((n_cells * nb, nc)) for _ in range(6))
-    base = {True: base, "mean": Combination(MEAN, (base, b)), "rk4": Combination(RK4_BASE, (base, b, c, d))}.get(update)
+    R = rng.standard_normal((n_cells * nb, nc))
     out = np.full_like(R, np.nan)
-    _apply_blocks(blocks, cell_dofs, R, out, R2 if two else None, base, 0.3)
-    if update == "mean":
-        assert np.array_equal(formed(base), 0.5 * (base.arrays[0] + b))
-    base = formed(base)
-    expected = np.empty_like(R)
-    for c in range(n_cells):
-        for k in range(nb):
-            for j in range(nc):
-                s = 0.0
-                for m in range(nb):
-                    r = cell_dofs[c, m]
-                    s += float(blocks[c, k, m]) * (float(R[r, j] + R2[r, j]) if two else float(R[r, j]))
-                expected[cell_dofs[c, k], j] = float(base[cell_dofs[c, k], j]) + 0.3 * s if update else s
-    assert np.array_equal(out, expected)
+    _apply_blocks(blocks, cell_dofs, R, out)
+    assert np.array_equal(out, _blocks_applied(blocks, cell_dofs, R))
+
+
+@pytest.mark.parametrize("nb, nc", SIZES)
+@pytest.mark.parametrize("volume_first, sourced, kind", [(False, False, "array"), (False, True, "mean"),
+                                                         (True, False, "rk4"), (True, True, "array")])
+def test_the_cell_pass_gives_the_bits_of_the_residual_stored_and_read_back(nb, nc, volume_first, sourced, kind):
+    """`dgfem.cell_update` (each row of R formed where the cell's mass block reads it, base +
+    step M^-1 R) against R stored by the passes it replaces, then the update written out in
+    Python: the faces' terms as `parallel.matmul` sums them (the interior gather, then the
+    boundary's added), the volume term as `system.volume_flux` does (first, and the faces' added
+    to it: ADER's corrector; or after them, RK's R + V), the source added. The same bits. The base
+    an array, or RK2's mean and RK4's last base (`integrators.Combination`) formed in the pass:
+    the bits of numpy's combination (`integrators.formed`, the expressions the integrators once
+    computed in passes of their own). Random sparse gathers and stiffness, the cells' dofs
+    shuffled."""
+    import scipy.sparse as sp
+
+    from skdgmpm import parallel, system
+    from skdgmpm.dgfem import cell_update
+    from skdgmpm.integrators import MEAN, RK4_BASE, Combination, formed
+    rng = np.random.default_rng(nb * nc + 10 * volume_first + sourced)
+    d = {2: 1, 6: 2}[nc]
+    n_cells, nf, nbf, n_points = 7, 19, 5, 30
+    n = n_cells * nb
+    blocks = rng.standard_normal((n_cells, nb, nb))
+    cell_dofs = rng.permutation(n).astype(np.int32).reshape(n_cells, nb)
+
+    def gather(cols):
+        return parallel.csr(sp.random(n, cols, density=0.3, random_state=rng, format="csr"))
+
+    interior, boundary = gather(nf), gather(nbf)
+    flux, flux_b, Q = rng.standard_normal((nf, nc)), rng.standard_normal((nbf, nc)), rng.standard_normal((n_points, nc))
+    measure, measure_b = rng.random(nf), rng.random(nbf)
+    K = system.Stiffness([sp.random(n, n_points, density=0.2, random_state=rng, format="csr") for _ in range(d)])
+    S = rng.standard_normal((n, nc)) if sourced else None
+    arrays = [rng.standard_normal((n, nc)) for _ in range(4)]
+    base = {"array": arrays[0], "mean": Combination(MEAN, tuple(arrays[:2])),
+            "rk4": Combination(RK4_BASE, tuple(arrays))}[kind]
+
+    out = cell_update(blocks, cell_dofs, (interior, measure, flux, boundary, measure_b, flux_b), Q, K, S, base, 0.3,
+                      volume_first)
+    if volume_first:
+        R = system.volume_flux(Q, K)
+        parallel.matmul(interior, flux, R, add=True, scale=measure)
+    else:
+        R = parallel.matmul(interior, flux, scale=measure)
+    parallel.matmul(boundary, flux_b, R, add=True, scale=measure_b)
+    if not volume_first:
+        R = R + system.volume_flux(Q, K)
+    if sourced:
+        R += S
+    if kind == "mean":
+        assert np.array_equal(formed(base), 0.5 * (arrays[0] + arrays[1]))
+    assert np.array_equal(out, _blocks_applied(blocks, cell_dofs, R, formed(base), 0.3))
 
 
 @pytest.mark.parametrize("method", ["rk-dgfem", "ader-dgfem", "ader-dgmpm", "mpm", "dgmpm"])
