@@ -331,7 +331,7 @@ class DGFEM(GodunovScheme):
         minus side L, `faces.FaceSet.integrate_jump`) and over the boundary's (side L, sign -1) as
         gathers per dof, with the facet points' measures and fluxes."""
         f, b = self.interior, self.boundary
-        return f._gather(("R", "L"), 1.0), f.measure, flux, b._gather(("L",), -1.0), b.measure, flux_bnd
+        return f.gather(("R", "L"), 1.0), f.measure, flux, b.gather(("L",), -1.0), b.measure, flux_bnd
 
     volume_first = False        # RK's residual: the faces' terms, then + the volume's (`cell_update`)
 

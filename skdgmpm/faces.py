@@ -103,18 +103,20 @@ class FaceSet:
         added to ``out`` (n_dofs, ncomp) if given: each dof sums its own rows' T[f, i] (measure[f]
         flux[f]) in face order (`parallel.matmul` on T^T), the bits of scipy's T.T @ (measure flux)
         or of the scatter into ``out``."""
-        return parallel.matmul(self._gather((side,), sign), flux, out, add=out is not None, scale=self.measure)
+        return parallel.matmul(self.gather((side,), sign), flux, out, add=out is not None, scale=self.measure)
 
     def integrate_jump(self, flux, out=None):
         """``int_Gamma Phi_i F*`` on side R minus that on side L (what the interior faces add to
         the residual of both their cells), added to ``out`` if given: one pass, each dof summing
         its side-R rows, then its side-L ones, in face order: the bits of `integrate` on side R,
         then on side L with sign -1, into ``out``."""
-        return parallel.matmul(self._gather(("R", "L"), 1.0), flux, out, add=out is not None, scale=self.measure)
+        return parallel.matmul(self.gather(("R", "L"), 1.0), flux, out, add=out is not None, scale=self.measure)
 
-    def _gather(self, sides, sign):
-        """T_(sides[0])^T, -T_(sides[1])^T, ... side by side: (n_dofs, nf) rows of one CSR triple,
-        each dof's entries side by side, then in face order; made once, on first use."""
+    def gather(self, sides, sign):
+        """sign T_(sides[0])^T, -sign T_(sides[1])^T, ... side by side: (n_dofs, nf) rows of one CSR
+        triple, each dof's entries side by side, then in face order; made once, on first use.
+        With the measures as the scale of its columns, `integrate` (one side) and `integrate_jump`
+        (("R", "L"), 1) apply it, and `dgfem.cell_update` forms its rows where it uses them."""
         cache = self.__dict__.setdefault("_gathers", {})
         key = (sides, sign)
         if key not in cache:
