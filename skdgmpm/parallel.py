@@ -679,10 +679,7 @@ def row_product(indptr, indices, data, X, r, u, nc):
     pass at the particles reads their states through DGMPM's back map)."""
     for c in range(nc):
         u[c] = 0.0
-    for k in range(indptr[r], indptr[r + 1]):
-        j, w = indices[k], data[k]
-        for c in range(nc):
-            u[c] += w * X[j, c]
+    csr_row_add((indptr, indices, data), data, X, r, u, nc, False)     # no scale: ``data`` stands in, unread
 
 
 def matmul(A, X, out=None, add=False, scale=None):
