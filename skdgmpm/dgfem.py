@@ -30,7 +30,7 @@ from .limiter import SlopeLimiter
 from .particles import Particles
 from .riemann import boundary_fluxes, face_passes, trace_fluxes
 from .scheme import GodunovScheme, GridState, ParticleState, boundary_power, stage
-from .system import volume_row
+from .system import DIMENSION, volume_row
 
 INTEGRATORS = ("rk2", "rk4")        # Euler is unstable for DG of degree >= 1
 
@@ -89,8 +89,9 @@ def _block_rows(blocks, cell_dofs, c, x, kind, bases, step, out, nb, nc, update)
 def cell_update(blocks, cell_dofs, faces, Q, stiffness, source, base, step, volume_first):
     """base + step M^-1 R in one pass over the cells, each row of R = volume + surface (+ source)
     formed where the cell's block reads it, none stored: M^-1 per cell (blocks (nel, nb, nb),
-    cell_dofs (nel, nb)); the surface term as `faces.FaceSet.integrate_jump` and the boundary's
-    `integrate` (sign -1) sum it, ``faces`` = (interior gather (a CSR triple, n_dofs rows), the
+    cell_dofs (nel, nb)); the surface term as `faces.FaceSet.integrate` sums it (the interior
+    faces' side R, then side L with sign -1; the boundary's side L with sign -1:
+    `faces.FaceSet.gather`), ``faces`` = (interior gather (a CSR triple, n_dofs rows), the
     interior facet points' measures, their fluxes, boundary gather, measures, fluxes); the volume
     term as `system.volume_flux` sums it (Q at the points, a `system.Stiffness`); ``source`` the
     source term's rows or None. The terms are added in the order each method's sum takes:
@@ -99,7 +100,7 @@ def cell_update(blocks, cell_dofs, faces, Q, stiffness, source, base, step, volu
     `_apply_blocks`: the same bits as R stored and read back, without its 4-6 passes over memory.
     ``base``: an array or an integrator's `Combination`. Rows of a cell in parallel chunks of cells."""
     nb, nc = blocks.shape[1], Q.shape[1]
-    d = {2: 1, 6: 2, 12: 3}[nc]
+    d = DIMENSION[nc]
     kernel = _cell_update(nb if d == 2 and nb in (4, 9) else None, d, int(volume_first), int(source is not None))
     kind, bases = base_parts(base)
     out = np.empty((stiffness.shape[0], nc))
@@ -328,7 +329,7 @@ class DGFEM(GodunovScheme):
 
     def faces_read(self, flux, flux_bnd):
         """What `cell_update` reads of the faces: -int Phi F_N* over the interior faces (side R
-        minus side L, `faces.FaceSet.integrate_jump`) and over the boundary's (side L, sign -1) as
+        minus side L, `faces.FaceSet.gather`) and over the boundary's (side L, sign -1) as
         gathers per dof, with the facet points' measures and fluxes."""
         f, b = self.interior, self.boundary
         return f.gather(("R", "L"), 1.0), f.measure, flux, b.gather(("L",), -1.0), b.measure, flux_bnd

@@ -105,18 +105,14 @@ class FaceSet:
         or of the scatter into ``out``."""
         return parallel.matmul(self.gather((side,), sign), flux, out, add=out is not None, scale=self.measure)
 
-    def integrate_jump(self, flux, out=None):
-        """``int_Gamma Phi_i F*`` on side R minus that on side L (what the interior faces add to
-        the residual of both their cells), added to ``out`` if given: one pass, each dof summing
-        its side-R rows, then its side-L ones, in face order: the bits of `integrate` on side R,
-        then on side L with sign -1, into ``out``."""
-        return parallel.matmul(self.gather(("R", "L"), 1.0), flux, out, add=out is not None, scale=self.measure)
-
     def gather(self, sides, sign):
         """sign T_(sides[0])^T, -sign T_(sides[1])^T, ... side by side: (n_dofs, nf) rows of one CSR
         triple, each dof's entries side by side, then in face order; made once, on first use.
-        With the measures as the scale of its columns, `integrate` (one side) and `integrate_jump`
-        (("R", "L"), 1) apply it, and `dgfem.cell_update` forms its rows where it uses them."""
+        With the measures as the scale of its columns, `integrate` applies one side's, and
+        `dgfem.cell_update` forms the rows of (("R", "L"), 1), int_Gamma Phi_i F* on side R minus
+        that on side L (what the interior faces add to both their cells' residuals), and of the
+        boundary's (("L",), -1) where it uses them: the bits of `integrate` on side R, then on
+        side L with sign -1."""
         cache = self.__dict__.setdefault("_gathers", {})
         key = (sides, sign)
         if key not in cache:
