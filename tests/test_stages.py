@@ -14,6 +14,7 @@ from skdgmpm import integrators
 from skdgmpm.build import build
 from skdgmpm.scene import load_scene
 
+TRIES = 5                       # three steps each; the best covers the step (see the test)
 ADER_DGMPM = ['method.name="ader-dgmpm"', "method.cfl=0.4", "particles.per_cell=[0.25, 0.75]"]
 CASES = {   # (scene, overrides): the stages that must not run
     "dgmpm-ctu": ("plate_impact_neohookean_2d", ["grid.cells=[6, 6]"], {"nodal_state", "source"}),
@@ -33,22 +34,29 @@ def test_a_step_runs_the_listed_stages_and_their_times_add_up(case):
     disc = build(load_scene(scene, overrides))
     stepper, state = disc.stepper, disc.initial
     state = stepper.step(state)                 # compiles (or loads) the kernels
-    stepper.stage_times(reset=True)
-    t0 = time.perf_counter()
-    for _ in range(3):
-        state = stepper.step(state)
-    wall = time.perf_counter() - t0
-    times = stepper.stage_times()
-    ran = set(times)
-    assert ran <= set(stepper.stages)                                   # nothing unlisted is timed
-    expected = set(stepper.stages) - idle
-    if getattr(stepper, "ctu", None) is None:
-        expected -= {"transverse_flux"}
-    assert ran == expected, (sorted(ran), sorted(expected))
-    assert all(calls >= 3 for _, calls in times.values())
-    own = sum(seconds for seconds, _ in times.values())
-    assert 0.5 * wall < own <= wall * 1.001                             # own times: no double counting
-    assert list(times) == [name for name in stepper.stages if name in times]
+    shares = []
+    for _ in range(TRIES):
+        stepper.stage_times(reset=True)
+        t0 = time.perf_counter()
+        for _ in range(3):
+            state = stepper.step(state)
+        wall = time.perf_counter() - t0
+        times = stepper.stage_times()
+        ran = set(times)
+        assert ran <= set(stepper.stages)                               # nothing unlisted is timed
+        expected = set(stepper.stages) - idle
+        if getattr(stepper, "ctu", None) is None:
+            expected -= {"transverse_flux"}
+        assert ran == expected, (sorted(ran), sorted(expected))
+        assert all(calls >= 3 for _, calls in times.values())
+        own = sum(seconds for seconds, _ in times.values())
+        assert own <= wall * 1.001                                      # own times: no double counting
+        assert list(times) == [name for name in stepper.stages if name in times]
+        shares.append(own / wall)
+    # the stages cover the step: more than half of it in the best try (a try the host preempts
+    # between two stages, e.g. beside another test process on two cores, counts that pause outside
+    # them: it measures the host, not the step)
+    assert max(shares) > 0.5, shares
 
 
 @pytest.mark.parametrize("name, order", [("euler", 1), ("rk2", 2), ("rk4", 4)])
