@@ -58,7 +58,8 @@ class ADERDGMPM(ADERDGFEM):
         xi[self.slot] = p.xi
         self.mask = np.zeros(nel * self.n_max)
         self.mask[self.slot] = 1.0
-        self.padding = np.flatnonzero(self.mask == 0)
+        self.is_padding = self.mask == 0       # the predictor's points (`_points`): made once, not every step
+        self.padding = np.flatnonzero(self.is_padding)
         self.slot_particle = np.full(nel * self.n_max, -1, dtype=np.int32)      # -1: padding
         self.slot_particle[self.slot] = np.arange(len(p))
         self.slot_cell = np.repeat(np.arange(nel), self.n_max)                   # cell and density of
@@ -136,7 +137,7 @@ class ADERDGMPM(ADERDGFEM):
         from `space_time_source` at the particles, or None."""
         S = None if source is None else np.stack([self._padded(s) for s in source])   # P+1 time nodes
         return self._picard(U_slots, dt, self._law_cells, self.D_particles, self.grad_at_particles,
-                            self._points(self.slot_cell, self.slot_rho0, self.mask == 0), S, Q_slots)
+                            self._points(self.slot_cell, self.slot_rho0, self.is_padding), S, Q_slots)
 
     def _law_cells(self, U):
         """The law at the particles on padded (..., nel, n_max, nc) arrays (padding stays zero):

@@ -29,7 +29,7 @@ from .parallel import csr_row_add
 from .limiter import SlopeLimiter
 from .particles import Particles
 from .riemann import boundary_fluxes, face_passes, trace_fluxes
-from .scheme import GodunovScheme, GridState, ParticleState, boundary_power, stage
+from .scheme import GodunovScheme, GridState, ParticleState, stage
 from .system import DIMENSION, volume_row
 
 INTEGRATORS = ("rk2", "rk4")        # Euler is unstable for DG of degree >= 1
@@ -173,6 +173,22 @@ def _point_matrix(basis, values):
     return sp.csr_matrix((values.ravel(), (rows.ravel(), cols.ravel())), shape=(nel * nq, basis.N))
 
 
+@njit(cache=True, nogil=True)
+def boundary_power_sums(measure, t, v, out):
+    """out[s] = sum_f |f| t_f . v_f (W) at each time node s of tractions t and velocities v (S,
+    nf, d) on boundary faces of measures ``measure`` (nf,), as the energy budget counts it: the
+    faces in order, t . v summed over i in order. Compiled: numpy's einsum and sum out of the
+    caches after the face pass took 70-150 µs a node at 256^2, for a few thousand faces."""
+    for s in range(t.shape[0]):
+        e = 0.0
+        for f in range(t.shape[1]):
+            p = 0.0
+            for i in range(t.shape[2]):
+                p += t[s, f, i] * v[s, f, i]
+            e += measure[f] * p
+        out[s] = e
+
+
 @dataclass
 class DGFEM(GodunovScheme):
     """RK-DGFEM of order ``order`` (P) on the active cells of ``grid``.
@@ -306,8 +322,11 @@ class DGFEM(GodunovScheme):
                                np.asarray(weights, dtype=float), flux, t_s, v_s), (flux, t_s, v_s)
 
     def boundary_powers(self, t_s, v_s):
-        """The power through the boundary (W) at each time node of `boundary_pass`, a list."""
-        return [boundary_power(self.boundary.measure, t_s[s], v_s[s]) for s in range(len(t_s))]
+        """The power through the boundary (W) at each time node of `boundary_pass`, a list
+        (`boundary_power_sums`)."""
+        out = np.empty(len(t_s))
+        boundary_power_sums(self.boundary.measure, t_s, v_s, out)
+        return out.tolist()
 
     @stage
     def interface_flux(self, interior, boundary):

@@ -59,12 +59,6 @@ def cell_values(name, cells, values, n_cells):
     return out
 
 
-def boundary_power(measure, t, v):
-    """The power through boundary faces of measures ``measure`` (nf,), tractions t and velocities
-    v (nf, d) on them: sum_f |f| t_f . v_f (W), as the energy budget counts it."""
-    return float(np.sum(measure * np.einsum("fi,fi->f", t, v)))
-
-
 def stage(method):
     """A named stage of a step (the scheme's ``stages`` lists them in the order they run): each
     call's wall time, less that of the stages it calls, is added to the scheme's clock
