@@ -128,6 +128,7 @@ def write(folder, scene, state, stepper, history, entries, next_frame, n_frames,
         arrays["probes"] = probes.table()
     meta = {
         "format": FORMAT, "t": state.t, "step": int(state.step), "health": state.health,
+        "fastest": None if state.fastest is None else float(state.fastest),   # the next step's: a law pass keeps no speeds
         "scene": {"name": scene.name, "data": scene.data, "path": str(Path(scene.path).resolve()) if scene.path else None,
                   "overridden": list(scene.overridden)},
         "stepper": stepper_state(stepper), "history_keys": list(history),
@@ -167,7 +168,7 @@ def read(folder):
     if meta.get("format") != FORMAT:
         raise InputError(f"--resume {folder}: {NAME} has format {meta.get('format')!r}, this version reads {FORMAT}")
     state = ParticleState(meta["t"], arrays["U"], arrays["Q"], arrays["x"], meta["step"], arrays.get("speed"),
-                          arrays.get("dofs"), meta["health"], arrays.get("history"))
+                          arrays.get("dofs"), meta["health"], arrays.get("history"), meta.get("fastest"))
     history = {k: list(arrays[f"energy_{k}"]) for k in meta["history_keys"]}
     s = meta["scene"]
     return Checkpoint(s["name"], s["data"], s["path"], state, meta["stepper"], history,

@@ -37,6 +37,9 @@ class Health:
     J : (n,) det F (1 where not finite)
     omega : (n,) smallest acoustic-tensor eigenvalue over `directions` (Pa; nan where not finite)
     speed : (n,) fastest wave speed along the grid axes (m/s)
+
+    The four arrays are None where the pass that made the health kept its summary only (a
+    step's law pass: `MaterialSet.update_and_assess`); `kept` tells.
     """
 
     finite: np.ndarray
@@ -50,6 +53,11 @@ class Health:
     def fastest(self):
         """The fastest wave speed over the points (m/s): the time step's."""
         return self.summary[3] if self.summary is not None else float(np.max(self.speed))
+
+    @property
+    def kept(self):
+        """Whether the per-point arrays are held (not the summary only)."""
+        return self.J is not None
 
     @property
     def bad(self):

@@ -17,7 +17,7 @@ from . import system
 from .bcs import FREE, BoundaryGhosts
 from .errors import InputError, InstabilityError
 from .faces import boundary_faces
-from .health import assess, with_momenta
+from .health import Health, assess, with_momenta
 
 
 @dataclass
@@ -177,7 +177,7 @@ class GodunovScheme:
         d = self.d
         Q, history, health, x = self.materials.update_and_assess(U, self.particles.material, self.particles.rho0,
                                                                  state.history, (state.x, state.Q[:, d * d:], dt),
-                                                                 gather, records)
+                                                                 gather, records, points=False)
         new = ParticleState(state.t + dt, U, Q, x, state.step + 1, history=history)
         self.check(new, health)
         return new
@@ -247,6 +247,9 @@ class GodunovScheme:
         the state's, if the law's pass computed it (`MaterialSet.update_and_assess`)."""
         if health is None:
             health = assess(self.materials, self.particles, state.U, state.Q)
+        elif not health.kept and health.summary[0] >= 0:    # the failing point's values, for the message:
+            alone = assess(self.materials, self.particles, state.U, state.Q)     # the pass's, bit for bit
+            health = Health(alone.finite, alone.J, alone.omega, alone.speed, health.summary)
         state.speed, state.fastest, state.health = health.speed, health.fastest, health.record()
         failure = health.first_failure(state, self.particles, self.d)
         if failure is not None:

@@ -75,6 +75,50 @@ def test_a_healthy_run_records_min_j_and_the_smallest_acoustic_eigenvalue():
     assert s["min_J_min"] == h["min_J"].min() and s["min_acoustic_min"] == h["min_acoustic"].min()
 
 
+@pytest.mark.parametrize("scene, overrides", [("plate_impact_neohookean_2d", ["grid.cells=[8, 6]"]),
+                                               ("plate_impact_j2_2d", ["grid.cells=[8, 6]"]),
+                                               ("bar_elastic_1d", ['method.name="ader-dgmpm"', "method.cfl=0.4",
+                                                                   "particles.per_cell=2", "grid.cells=20"])])
+def test_a_step_keeps_the_health_summary_only_the_stand_alone_checks(scene, overrides):
+    """A step's law pass writes no per-point health (`Health.kept` False: four arrays no step
+    reads); the state's fastest wave and health record are those of the state assessed whole
+    (`health.assess`, an independent kernel), bit for bit, and so are the per-point arrays where
+    the pass is asked for them."""
+    from skdgmpm.build import build
+    from skdgmpm.health import assess
+    from skdgmpm.scene import load_scene
+
+    disc = build(load_scene(scene, overrides))
+    st, state = disc.stepper, disc.initial
+    kept = []
+    update = type(st.materials).update_and_assess
+
+    def spy(self, *args, **kwargs):
+        out = update(self, *args, **kwargs)
+        kept.append(out[2].kept)
+        return out
+
+    type(st.materials).update_and_assess = spy
+    try:
+        for _ in range(3):
+            state = st.step(state)
+    finally:
+        type(st.materials).update_and_assess = update
+    assert kept and not any(kept) and state.speed is None
+    alone = assess(st.materials, st.particles, state.U, state.Q)
+    assert state.fastest == alone.fastest and state.health == alone.record()
+    assert state.health["min_J"] != 1.0                       # the load has reached the points
+    motion = (state.x, state.Q[:, st.d * st.d:], 0.0)
+    args = (state.U, st.particles.material, st.particles.rho0, state.history, motion)
+    for points in (True, False):
+        health = st.materials.update_and_assess(*args, points=points)[2]
+        assert health.kept == points and health.summary == alone.summary
+    np.testing.assert_array_equal(health.fastest, alone.fastest)
+    with_points = st.materials.update_and_assess(*args)[2]
+    for name in ("finite", "J", "omega", "speed"):
+        np.testing.assert_array_equal(getattr(with_points, name), getattr(alone, name))
+
+
 @pytest.mark.parametrize("d", [1, 2])
 def test_the_law_pass_assesses_the_state_as_the_stand_alone_check_and_numpy_do(d):
     """`MaterialSet.update_and_assess` (health and positions beside the stress, one pass) gives the same arrays
