@@ -128,7 +128,8 @@ def write(folder, scene, state, stepper, history, entries, next_frame, n_frames,
         arrays["probes"] = probes.table()
     meta = {
         "format": FORMAT, "t": state.t, "step": int(state.step), "health": state.health,
-        "fastest": None if state.fastest is None else float(state.fastest),   # the next step's: a law pass keeps no speeds
+        # the next step's fastest wave: a state made by a law pass holds no speeds
+        "fastest": None if state.fastest is None else float(state.fastest),
         "scene": {"name": scene.name, "data": scene.data, "path": str(Path(scene.path).resolve()) if scene.path else None,
                   "overridden": list(scene.overridden)},
         "stepper": stepper_state(stepper), "history_keys": list(history),

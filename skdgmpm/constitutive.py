@@ -218,8 +218,9 @@ class MaterialSet:
         """`update`, the new state's `skdgmpm.health.Health` and the points' new positions in the
         same pass over the points (the law's tangent at F beside its stress: F embedded once, the
         state read once): (Q, history, Health, x). ``points`` False: the Health's summary only
-        (first bad point, extremes), no per-point array written (`Health.kept`). ``motion`` = (x (n, dim), v_old (n, dim), dt):
-        the positions moved by the trapezoidal rule, x + dt (v_old + v) / 2. ``gather`` = (A CSR,
+        (first bad point, extremes), no per-point array written (`Health.kept`). ``motion`` = (x
+        (n, dim), v_old (n, dim), dt): the positions moved by the trapezoidal rule, x + dt (v_old +
+        v) / 2. ``gather`` = (A CSR,
         nodal values): the points' states are A @ nodal, computed row by row in the pass and
         written into U (the same bits as `parallel.matmul`); or a `dgmpm_kernels.CellRows`: the
         points' states are its rows (the same bits as `dgmpm_kernels.cell_update`). ``records`` = (rec, row, normals,

@@ -247,8 +247,10 @@ class GodunovScheme:
         the state's, if the law's pass computed it (`MaterialSet.update_and_assess`)."""
         if health is None:
             health = assess(self.materials, self.particles, state.U, state.Q)
-        elif not health.kept and health.summary[0] >= 0:    # the failing point's values, for the message:
-            alone = assess(self.materials, self.particles, state.U, state.Q)     # the pass's, bit for bit
+        elif not health.kept and health.summary[0] >= 0:
+            # a bad point, of a pass that kept its summary only: the message's values from the
+            # state assessed whole (the pass's numbers, bit for bit)
+            alone = assess(self.materials, self.particles, state.U, state.Q)
             health = Health(alone.finite, alone.J, alone.omega, alone.speed, health.summary)
         state.speed, state.fastest, state.health = health.speed, health.fastest, health.record()
         failure = health.first_failure(state, self.particles, self.d)

@@ -79,7 +79,7 @@ def test_a_healthy_run_records_min_j_and_the_smallest_acoustic_eigenvalue():
                                                ("plate_impact_j2_2d", ["grid.cells=[8, 6]"]),
                                                ("bar_elastic_1d", ['method.name="ader-dgmpm"', "method.cfl=0.4",
                                                                    "particles.per_cell=2", "grid.cells=20"])])
-def test_a_step_keeps_the_health_summary_only_the_stand_alone_checks(scene, overrides):
+def test_a_step_keeps_the_health_summary_only_the_stand_alone_checks(scene, overrides, monkeypatch):
     """A step's law pass writes no per-point health (`Health.kept` False: four arrays no step
     reads); the state's fastest wave and health record are those of the state assessed whole
     (`health.assess`, an independent kernel), bit for bit, and so are the per-point arrays where
@@ -98,12 +98,10 @@ def test_a_step_keeps_the_health_summary_only_the_stand_alone_checks(scene, over
         kept.append(out[2].kept)
         return out
 
-    type(st.materials).update_and_assess = spy
-    try:
-        for _ in range(3):
-            state = st.step(state)
-    finally:
-        type(st.materials).update_and_assess = update
+    monkeypatch.setattr(type(st.materials), "update_and_assess", spy)
+    for _ in range(3):
+        state = st.step(state)
+    monkeypatch.undo()
     assert kept and not any(kept) and state.speed is None
     alone = assess(st.materials, st.particles, state.U, state.Q)
     assert state.fastest == alone.fastest and state.health == alone.record()
@@ -113,7 +111,6 @@ def test_a_step_keeps_the_health_summary_only_the_stand_alone_checks(scene, over
     for points in (True, False):
         health = st.materials.update_and_assess(*args, points=points)[2]
         assert health.kept == points and health.summary == alone.summary
-    np.testing.assert_array_equal(health.fastest, alone.fastest)
     with_points = st.materials.update_and_assess(*args)[2]
     for name in ("finite", "J", "omega", "speed"):
         np.testing.assert_array_equal(getattr(with_points, name), getattr(alone, name))
