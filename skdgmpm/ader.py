@@ -195,16 +195,16 @@ def _block_scale_of(big, dd, out):
     """`_block_scale` from the chunks' largest |U| per block ``big`` (chunks, 2), into out (nc,):
     each block's largest (nan if a chunk's is), 1 where that is 0. Compiled: numpy's reductions
     and selections on these few numbers took 50-100 µs of a step, out of the caches."""
+    scale = np.empty(2)                 # the F block's, the p block's
     for b in range(2):
         m, nan = 0.0, False
         for c in range(big.shape[0]):
             x = big[c, b]
             nan |= x != x
             m = max(m, x)
-        m = np.nan if nan else (m if m != 0.0 else 1.0)
-        for k in range(len(out)):
-            if (k < dd) == (b == 0):
-                out[k] = m
+        scale[b] = np.nan if nan else (m if m != 0.0 else 1.0)
+    for k in range(len(out)):
+        out[k] = scale[0] if k < dd else scale[1]
 
 
 @njit(cache=True, nogil=True)

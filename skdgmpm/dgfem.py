@@ -21,6 +21,7 @@ from skfem import (CellBasis, ElementDG, ElementLineP1, ElementLineP2, ElementQu
 
 from . import forms, integrators, parallel, system
 from .elements import ElementLineLagrange
+from .equations import power
 from .errors import InputError
 from .faces import interior_faces
 from .integrators import base_entry, base_parts
@@ -177,15 +178,16 @@ def _point_matrix(basis, values):
 def boundary_power_sums(measure, t, v, out):
     """out[s] = sum_f |f| t_f . v_f (W) at each time node s of tractions t and velocities v (S,
     nf, d) on boundary faces of measures ``measure`` (nf,), as the energy budget counts it: the
-    faces in order, t . v summed over i in order. Compiled: numpy's einsum and sum out of the
-    caches after the face pass took 70-150 µs a node at 256^2, for a few thousand faces."""
+    faces in order (`equations.power`). Compiled: numpy's einsum and sum out of the caches after
+    the face pass took 70-150 µs a node at 256^2, for a few thousand faces."""
+    d = t.shape[2]
+    t_f, v_f = np.empty(d), np.empty(d)     # rows copied, not viewed (views are reference counted)
     for s in range(t.shape[0]):
         e = 0.0
         for f in range(t.shape[1]):
-            p = 0.0
-            for i in range(t.shape[2]):
-                p += t[s, f, i] * v[s, f, i]
-            e += measure[f] * p
+            for i in range(d):
+                t_f[i], v_f[i] = t[s, f, i], v[s, f, i]
+            e += measure[f] * power(t_f, v_f, d)
         out[s] = e
 
 
@@ -410,10 +412,12 @@ class DGFEM(GodunovScheme):
 
     @stage
     def evaluate_points(self, state, dofs, dt):
-        """State at the Gauss points from the dofs; positions advanced with the new velocity."""
+        """State at the Gauss points from the dofs; positions advanced with the new velocity. The
+        law's pass keeps the health summary only, as DGMPM's step (`GodunovScheme.check`)."""
         U = parallel.matmul(self.B, dofs)
         Q, history, health, x = self.materials.update_and_assess(
-            U, self.gauss.material, self.gauss.rho0, state.history, (state.x, state.Q[:, self.d * self.d:], dt))
+            U, self.gauss.material, self.gauss.rho0, state.history, (state.x, state.Q[:, self.d * self.d:], dt),
+            points=False)
         new = ParticleState(state.t + dt, U, Q, x, state.step + 1, dofs=dofs, history=history)
         self.check(new, health)
         return new

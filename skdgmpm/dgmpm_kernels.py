@@ -38,7 +38,7 @@ from skdgmpm.materials.points import only_law, tangent_call, tangent_point, tang
 
 from . import parallel
 from .equations import (add_normal_flux, ctu_parts, ctu_parts_opposite, ctu_split, embed, fluctuations, godunov,
-                        impedance, traction)
+                        impedance, power, traction)
 from .bcs import ghost_face
 from .faces import gather_row
 from .health import identity_if_not
@@ -622,10 +622,9 @@ def _boundary_terms(d, ctu, integrate):
     def boundary_terms(T, measure, N, flux, t_s, v_s, filters, corr_bnd, dt, weight, R):
         dd, nc = d * d, d * d + d
         filt, which = filters
-        g, c = scratch((nc,)), scratch((nc,))
-        power = 0.0
+        g, c, t_f, v_f = scratch((nc,)), scratch((nc,)), scratch((d,)), scratch((d,))
+        total = 0.0
         for f in range(len(measure)):
-            e = 0.0
             if ctu:
                 for j in range(nc):
                     c[j] = dt * corr_bnd[f, j]
@@ -639,20 +638,20 @@ def _boundary_terms(d, ctu, integrate):
                     v = 0.0
                     for b in range(d):
                         v += g[i * d + b] * N[f, b]
-                    e += (-g[dd + i]) * (-v)
+                    t_f[i], v_f[i] = -g[dd + i], -v
             else:
                 for k in range(nc):
                     g[k] = flux[f, k]
                 for i in range(d):
-                    e += t_s[f, i] * v_s[f, i]
-            power += measure[f] * e
+                    t_f[i], v_f[i] = t_s[f, i], v_s[f, i]
+            total += measure[f] * power(t_f, v_f, d)
             m = -1.0 * measure[f]
             if integrate:
                 _integrate(T, f, m, g, weight, R)
             else:                           # the product `_integrate` forms before its weights
                 for k in range(nc):
                     R[f, k] = m * g[k]
-        return power
+        return total
     return boundary_terms
 
 

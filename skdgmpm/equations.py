@@ -68,6 +68,16 @@ def traction(q, n, t, d):
 
 
 @njit(cache=True, inline="always")
+def power(t, v, d):
+    """t . v: the power per unit area through a face of traction t and velocity v (W/m^2 in 2D),
+    summed over i in order: every boundary's energy budget adds its faces' so."""
+    s = 0.0
+    for i in range(d):
+        s += t[i] * v[i]
+    return s
+
+
+@njit(cache=True, inline="always")
 def add_flux(q, alpha, scale, out, d):
     """out += scale F_alpha(q), F_alpha = -[v (x) E_alpha ; P E_alpha] (F_alpha is linear: the
     volume terms apply it once to a weighted sum of states)."""

@@ -78,7 +78,11 @@ def test_a_healthy_run_records_min_j_and_the_smallest_acoustic_eigenvalue():
 @pytest.mark.parametrize("scene, overrides", [("plate_impact_neohookean_2d", ["grid.cells=[8, 6]"]),
                                                ("plate_impact_j2_2d", ["grid.cells=[8, 6]"]),
                                                ("bar_elastic_1d", ['method.name="ader-dgmpm"', "method.cfl=0.4",
-                                                                   "particles.per_cell=2", "grid.cells=20"])])
+                                                                   "particles.per_cell=2", "grid.cells=20"]),
+                                               ("plate_impact_neohookean_2d", ['method.name="ader-dgfem"',
+                                                                               "grid.cells=[8, 6]"]),
+                                               ("bar_elastoplastic_1d", ['method.name="rk-dgfem"',
+                                                                         'method.integrator="rk2"', "grid.cells=20"])])
 def test_a_step_keeps_the_health_summary_only_the_stand_alone_checks(scene, overrides, monkeypatch):
     """A step's law pass writes no per-point health (`Health.kept` False: four arrays no step
     reads); the state's fastest wave and health record are those of the state assessed whole
@@ -114,6 +118,35 @@ def test_a_step_keeps_the_health_summary_only_the_stand_alone_checks(scene, over
     with_points = st.materials.update_and_assess(*args)[2]
     for name in ("finite", "J", "omega", "speed"):
         np.testing.assert_array_equal(getattr(with_points, name), getattr(alone, name))
+
+
+RK2_DGFEM, ADER_DGFEM = ['method.name="rk-dgfem"', 'method.integrator="rk2"'], ['method.name="ader-dgfem"',
+                                                                                   "method.order=2", "method.cfl=0.5"]
+
+
+# (ADER-DGFEM's face pass finds the lost hyperbolicity before its points do: not a point's stop)
+@pytest.mark.parametrize("method, condition", [(RK2_DGFEM, "hyperbolicity"), (RK2_DGFEM, "J <= 0"),
+                                               (ADER_DGFEM, "J <= 0")])
+def test_a_dg_step_that_keeps_the_summary_only_stops_with_the_message_of_the_points_arrays(method, condition,
+                                                                                           monkeypatch):
+    """DGFEM's step keeps the law pass's health summary only; a stop then assesses the state whole
+    to name its point. The message is the one the pass's own per-point arrays give (the pass
+    asked to keep them: the reference), and names a Gauss point of the first bad cell."""
+    from skdgmpm.constitutive import MaterialSet
+
+    scene, overrides, start, quantity = CONDITIONS[condition]
+    messages = []
+    for keep in (False, True):
+        if keep:                        # every law pass keeps its arrays: the message from them
+            update = MaterialSet.update_and_assess
+            monkeypatch.setattr(MaterialSet, "update_and_assess",
+                                lambda *args, points=True, **kwargs: update(*args, points=True, **kwargs))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            r = run(scene, overrides + method, progress=False)
+        assert r.status == "unstable" and r.message.startswith(start.split(" at step")[0]), r.message
+        messages.append(r.message)
+    assert messages[0] == messages[1] and quantity in messages[0] and " in cell 0 " in messages[0]
 
 
 @pytest.mark.parametrize("d", [1, 2])
