@@ -48,9 +48,9 @@ def main(argv=None):
         for floor in (0.0, 1.8, 1.9, 1.95):
             kept = r[r[:, 1] >= floor]
             if len(kept):
-                print(f"  probe >= {floor:.2f}: {len(kept):5d} rounds, step x{np.median(kept[:, 0]):.2f} (median), "
-                      f"{np.mean(kept[:, 0] >= 1.8):.0%} at 1.8 or more, the step {np.median(kept[:, 0] / kept[:, 1]):.2f} "
-                      "of the probe")
+                step, share = np.median(kept[:, 0]), np.median(kept[:, 0] / kept[:, 1])
+                print(f"  probe >= {floor:.2f}: {len(kept):5d} rounds, step x{step:.2f} (median), "
+                      f"{np.mean(kept[:, 0] >= 1.8):.0%} at 1.8 or more, the step {share:.2f} of the probe")
 
 
 if __name__ == "__main__":
