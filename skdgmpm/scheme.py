@@ -17,7 +17,7 @@ from . import system
 from .bcs import FREE, BoundaryGhosts
 from .errors import InputError, InstabilityError
 from .faces import boundary_faces
-from .health import Health, assess, with_momenta
+from .health import assess, with_momenta
 
 
 @dataclass
@@ -245,13 +245,10 @@ class GodunovScheme:
         cell, quantity and value (`skdgmpm.health`); sets the wave speeds of ``state`` used by the
         next time step and its ``health`` record (min J, smallest acoustic eigenvalue). ``health``:
         the state's, if the law's pass computed it (`MaterialSet.update_and_assess`)."""
-        if health is None:
+        if health is None or (not health.kept and health.summary[0] >= 0):
+            # none, or a bad point of a pass that kept its summary only: the state assessed whole
+            # names it (the pass's numbers and summary, bit for bit)
             health = assess(self.materials, self.particles, state.U, state.Q)
-        elif not health.kept and health.summary[0] >= 0:
-            # a bad point, of a pass that kept its summary only: the message's values from the
-            # state assessed whole (the pass's numbers, bit for bit)
-            alone = assess(self.materials, self.particles, state.U, state.Q)
-            health = Health(alone.finite, alone.J, alone.omega, alone.speed, health.summary)
         state.speed, state.fastest, state.health = health.speed, health.fastest, health.record()
         failure = health.first_failure(state, self.particles, self.d)
         if failure is not None:
