@@ -44,8 +44,8 @@ from skdgmpm.materials.points import law_table
 
 from . import parallel, system
 from .dgmpm_kernels import (CellRows, boundary_corrections, boundary_edge_corrections, boundary_faces, boundary_terms,
-                            cell_corrections, cell_records, cell_update, euler_update, face_width,
-                            interior_pass, split_width)
+                            cell_corrections, cell_records, cell_update, euler_update, interior_pass,
+                            kept_width, split_width)
 from .errors import InputError
 from .faces import interior_faces
 from .integrators import INTEGRATORS
@@ -129,7 +129,7 @@ class DGMPM(GodunovScheme):
         self._setup_transverse()
         # the cell records (`_records`): work arrays of every step, their shapes the grid's, made once
         slots, ctu = self.cell_normals.shape[1], self.ctu is not None
-        self._record_arrays = ((np.empty((n_cells, face_width(self.d, slots))),
+        self._record_arrays = ((np.empty((n_cells, kept_width(self.d, slots))),
                                 np.empty((n_cells, split_width(self.d, slots, ctu)))), np.empty(n_cells, np.int8))
         self.laws = law_table(self.materials.materials)          # the compiled point laws
         f = self.interior
@@ -230,10 +230,8 @@ class DGMPM(GodunovScheme):
 
     def initial_state(self, F, v, t=0.0):
         state = super().initial_state(F, v, t)
-        if self.cellwise:       # a record begins with its state q (`fill_record`): v as given there too
-            face = self._records()[0][0]
-            face[self.point_cell, :state.Q.shape[1]] = state.Q
-            self._records_of = (state.U, state.Q)       # the first step's faces read them
+        if self.cellwise:       # the first step's faces read them (a record's state: Q's row, v as given)
+            self._records_of = (state.U, state.Q)
         return state
 
     # ---------------------------------------------------------------- set-up
@@ -249,6 +247,8 @@ class DGMPM(GodunovScheme):
             self.cell_dofs = self.point[:, None]
         else:
             self.cell_dofs = np.argsort(self.dof_cell, kind="stable").astype(np.int32).reshape(n_cells, -1)
+        # where a recorded cell's state is (its first node's row; the records keep the rest)
+        self.state_rows = np.ascontiguousarray(self.cell_dofs[:, 0])
         self.local_face = tuple(_local_face(m, cells, f.facets).astype(np.int8) for cells in (f.cell_L, f.cell_R))
         self.boundary_local_face = _local_face(m, self.boundary.cell_L, self.boundary.facets).astype(np.int8)
         normal = np.zeros((m.nfacets, self.d))
@@ -376,7 +376,7 @@ class DGMPM(GodunovScheme):
             n_L = n_R = np.zeros((0, 2, 2))
 
         interior = interior_pass(T_L, T_R, grid_state.U, grid_state.Q, rho, f.normal, f.cell_L, f.cell_R,
-                                 self.cell_material, *laws, (rec, state, normals, k_L, k_R, recorded, self.trace_path),
+                                 self.cell_material, *laws, (rec, state, normals, k_L, k_R, recorded, self.trace_path, self.state_rows),
                                  ctu, (h_L, n_L), (h_R, n_R), flux, G)
         boundary, (flux_b, t_s, v_s, parts) = self.boundary_pass(grid_state, time)
         face_passes(interior, boundary, together=not self.trace_path)
@@ -410,7 +410,7 @@ class DGMPM(GodunovScheme):
         run = boundary_faces(self.traces["boundary"], grid_state.U, grid_state.Q, self.density, b.normal, b.cell_L,
                              self.cell_material, *self.laws, (g.frame, g.velocity, g.values_at(time), g.copy), ctu,
                              self.topology["boundary"],
-                             (rec, state, self.cell_normals, self.boundary_local_face, self.trace_path), flux, t_s,
+                             (rec, state, self.cell_normals, self.boundary_local_face, self.trace_path, self.state_rows), flux, t_s,
                              v_s, parts)
         return run, (flux, t_s, v_s, parts)
 

@@ -2,7 +2,9 @@
 
 Each side of a face needs its state q = [P, v], 1 / rho, the law's tangent C and the impedances
 Z = sqrt(rho A_n) (and Z^-1) along the face and, for CTU, along the cell's two edges adjacent to
-it: its *side record* (`record_width`). A cell whose nodes all hold one state (bit for bit: one
+it: its *side record* (`record_width`). The cell records keep all of it but q, which the face
+passes read from Q at the cell's row (its particle, or its first node: ``rows``), where it is
+already (48 bytes a 2D cell not written twice). A cell whose nodes all hold one state (bit for bit: one
 particle in the cell, R18's usual layout, or a uniform field) has one record for its four faces,
 computed once per right-hand side by `cell_records` (the law at the cell, the impedances along the
 cell's face directions), or with one particle per cell by the law's pass that made the state
@@ -97,8 +99,15 @@ def _add_boundary_edges(edge_bnd, f, G_0, G_1, corr_bnd):
 # between them would be half the lines it pulls from memory).
 @njit(cache=True, inline="always")
 def face_width(d, slots):
-    """Entries of a side record's face part (the first array of the cell records)."""
+    """Entries of a side record's face part: its state q and its impedances."""
     return d * d + d + d * d * slots
+
+
+@njit(cache=True, inline="always")
+def kept_width(d, slots):
+    """Entries of a side record's face part that the cell records keep (their first array): the
+    impedances; q is Q's row (`_copy_state`)."""
+    return face_width(d, slots) - (d * d + d)
 
 
 @njit(cache=True, inline="always")
@@ -178,8 +187,8 @@ def fill_record(q, rho, C, normals, r, d, slots, split):
 @njit(cache=True, inline="always")
 def write_record(q, rho, C, normals, c, rec, state, n_c, r, d, slots, split):
     """The side record of cell c (`fill_record`, the cell's face directions normals[c]) into row c
-    of rec = (face parts, split parts), and its record state: 1, or 2 where an acoustic tensor is
-    not positive definite (`cell_records`, and the law's pass with one particle per cell,
+    of rec = (face parts but q, split parts), and its record state: 1, or 2 where an acoustic
+    tensor is not positive definite (`cell_records`, and the law's pass with one particle per cell,
     `skdgmpm.constitutive`). n_c (slots, d) and r (record width) are stack scratch (rows copied,
     never viewed)."""
     for s in range(slots):
@@ -187,35 +196,43 @@ def write_record(q, rho, C, normals, c, rec, state, n_c, r, d, slots, split):
             n_c[s, i] = normals[c, s, i]
     state[c] = 1 if fill_record(q, rho, C, n_c, r, d, slots, split) else 2
     face, rest = rec
-    o = face_width(d, slots)
-    for k in range(o):                  # widths from the literals: the copies unroll
-        face[c, k] = r[k]
+    nc, o = d * d + d, face_width(d, slots)
+    for k in range(kept_width(d, slots)):       # widths from the literals: the copies unroll
+        face[c, k] = r[nc + k]
     for k in range(split_width(d, slots, split)):
         rest[c, k] = r[o + k]
 
 
 @njit(cache=True, inline="always")
 def _copy_record(rec, c, r, d, slots, split):
-    """Row c of the cell records rec = (face parts, split parts) into the side record r (stack
-    scratch: no array view, whose reference counting would cost more than the copy); with a
-    literal ``split`` the copies unroll."""
+    """Row c of the cell records rec = (face parts but q, split parts) into the side record r
+    (stack scratch: no array view, whose reference counting would cost more than the copy), all
+    but its state r[:nc] (`_copy_state`, for a reader that needs it); with a literal ``split`` the
+    copies unroll."""
     face, rest = rec
-    o = face_width(d, slots)
-    for k in range(o):
-        r[k] = face[c, k]
+    nc, o = d * d + d, face_width(d, slots)
+    for k in range(kept_width(d, slots)):
+        r[nc + k] = face[c, k]
     for k in range(split_width(d, slots, split)):
         r[o + k] = rest[c, k]
 
 
 @njit(cache=True, inline="always")
-def _copy_side(rec, state, c, slot, q, Z, d):
-    """What a face reads of the record of cell c: its state into q[:nc] and its impedance along
-    the face direction ``slot`` into Z (10 of a 2D record's 39 numbers, all in its face part);
-    whether it is admissible."""
-    face = rec[0]
+def _copy_state(Q, row, q, d):
+    """The state of a recorded cell, Q's row ``row`` (the cell's particle or first node), into
+    q[:nc]: what its record would have repeated."""
     for k in range(d * d + d):
-        q[k] = face[c, k]
-    o = _impedance_at(d, slot)
+        q[k] = Q[row, k]
+
+
+@njit(cache=True, inline="always")
+def _copy_side(rec, state, c, slot, Q, row, q, Z, d):
+    """What a face reads of recorded cell c: its state, Q's row ``row``, into q[:nc] and its
+    impedance along the face direction ``slot`` into Z (10 of a 2D side record's 39 numbers);
+    whether it is admissible."""
+    _copy_state(Q, row, q, d)
+    o = _impedance_at(d, slot) - (d * d + d)        # where the record keeps it
+    face = rec[0]
     for i in range(d):
         for j in range(d):
             Z[i, j] = face[c, o + i * d + j]
@@ -304,8 +321,9 @@ def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, p
     transverse parts per unit Delta t of both sides' fluctuations into G (nf, 4, nc): side L's
     for its cell's two edges in G[:, 0:2], side R's in G[:, 2:4] (summed on the edges by a row
     gather, `parallel.matmul`: each face writes its own rows only). ``records`` = (rec,
-    state, normals, local face of each face in cell L, in cell R, recorded, traces)
-    (`cell_records`): a side whose cell is recorded reads its record, another computes its
+    state, normals, local face of each face in cell L, in cell R, recorded, traces, rows)
+    (`cell_records`; rows (n_cells,) int32: each cell's row of U and Q, where a recorded cell's
+    state is read): a side whose cell is recorded reads its record, another computes its
     trace's record. With ``recorded`` (every cell is) CTU writes the two fluctuations into G (nf,
     2, nc) instead, for `cell_corrections`. ``traces``: whether a cell may be unrecorded (any
     layout but one particle per cell); without, the trace path is not compiled. One kernel serves
@@ -313,11 +331,12 @@ def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, p
     topologies are empty without CTU. Returns the pass, the faces in chunks on the threads (a
     `parallel.Pass`, to run alone or with the boundary faces': `parallel.together`), which
     returns the first face whose acoustic tensor is not positive definite, or -1."""
-    rec, state, normals, k_L, k_R, recorded, traces = records
+    rec, state, normals, k_L, k_R, recorded, traces, rows = records
     kernel = _interior_pass(N.shape[1], normals.shape[1], bool(traces), only_law(laws))
-    return parallel.Pass(len(N), kernel, "ccwwwrrrwwwwwwrrww(rr)(rr)rr",
+    return parallel.Pass(len(N), kernel, "ccwwwrrrwwwwwwwrrww(rr)(rr)rr",
                          (parallel.csr(T_L), parallel.csr(T_R), U, Q, rho, N, cell_L, cell_R, cell_material, laws,
-                          params, rec, state, normals, k_L, k_R, bool(recorded), ctu, topo_L, topo_R, flux, G), "first")
+                          params, rec, state, rows, normals, k_L, k_R, bool(recorded), ctu, topo_L, topo_R, flux, G),
+                         "first")
 
 
 @kernel_factory
@@ -325,8 +344,8 @@ def _interior_pass(d, slots, traces, only):  # literals: the loops unrolled, the
     nc, dd = d * d + d, d * d
     width = record_width(d, slots)
 
-    def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params, rec, state, normals,
-                      k_L, k_R, recorded, ctu, topo_L, topo_R, flux, G):
+    def interior_pass(T_L, T_R, U, Q, rho, N, cell_L, cell_R, cell_material, laws, params, rec, state, rows,
+                      normals, k_L, k_R, recorded, ctu, topo_L, topo_R, flux, G):
         s_L, s_R, w_L, w_R = scratch((width,)), scratch((width,)), scratch((nc,)), scratch((nc,))
         q_L, q_R, F_L, F_R = scratch((nc,)), scratch((nc,)), scratch((3, 3)), scratch((3, 3))
         C_L, C_R, Z_L, Z_R = scratch((d, d, d, d)), scratch((d, d, d, d)), scratch((d, d)), scratch((d, d))
@@ -357,12 +376,13 @@ def _interior_pass(d, slots, traces, only):  # literals: the loops unrolled, the
                     if state[c] == 0:               # a view: rare path
                         ok &= fill_record(q, rho_f[side], C, normals[c], s, d, slots, ctu)
                     else:
+                        _copy_state(Q, rows[c], s, d)
                         _copy_record(rec, c, s, d, slots, ctu)
                         ok &= state[c] == 1
                     _record_impedance(s, k % slots, Z, d)
             else:                               # every cell recorded: no trace read, no tangent needed
-                ok = _copy_side(rec, state, c_L, k_L[f] % slots, s_L, Z_L, d)
-                ok &= _copy_side(rec, state, c_R, k_R[f] % slots, s_R, Z_R, d)
+                ok = _copy_side(rec, state, c_L, k_L[f] % slots, Q, rows[c_L], s_L, Z_L, d)
+                ok &= _copy_side(rec, state, c_R, k_R[f] % slots, Q, rows[c_R], s_R, Z_R, d)
             if not ok:
                 return f
             for i in range(d):              # rows copied, not viewed (views are reference counted)
@@ -499,7 +519,8 @@ def boundary_faces(T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, c
     the transverse corrections per unit Delta t of the fluctuation F_N(t*, v*) - F_N(t_L, v_L)
     entering the cell along its two edges adjacent to the face into parts (nf, 2, nc)
     (`boundary_corrections` adds them where they go). ``records`` = (rec, state, normals, local
-    face of each face in its cell, traces) (`cell_records`, the state's): a face whose cell is
+    face of each face in its cell, traces, each cell's row of U and Q) (`cell_records`, the
+    state's, `interior_pass`): a face whose cell is
     recorded reads its side there (as an interior face does), another gathers its trace and
     evaluates the law's tangent (a face then costs about ten interior faces); without ``traces``
     (every cell always recorded, as `interior_pass` has it) that path is not compiled: a 2D
@@ -507,10 +528,10 @@ def boundary_faces(T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, c
     chunks run in parallel, each of an eighth of `parallel.MIN_ROWS` faces at least. Returns the
     pass (a `parallel.Pass`), which returns the first face whose acoustic tensor, along the face
     or (CTU) an edge, is not positive definite, or -1."""
-    rec, state, normals, local, traces = records
+    rec, state, normals, local, traces, rows = records
     kernel = _boundary_faces(N.shape[1], normals.shape[1], bool(traces), only_law(laws))
     return parallel.Pass(len(N), kernel, "lh" + "w" * 17,
-                         (T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, (rec, state, local),
+                         (T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, (rec, state, local, rows),
                           flux, t_s, v_s, parts), "first", max(1, parallel.MIN_ROWS // 8))
 
 
@@ -524,14 +545,14 @@ def _boundary_faces(d, slots, traces, only):   # without traces the trace path i
         q, F, Zi, w = scratch((nc,)), scratch((3, 3)), scratch((d, d)), scratch((nc,))
         t_L, v_L, Z, C = scratch((d,)), scratch((d,)), scratch((d, d)), scratch((d, d, d, d))
         r, n, t_f, v_f, o = scratch((width,)), scratch((d,)), scratch((d,)), scratch((d,)), scratch((nc,))
-        rec, state, local = records
+        rec, state, local, rows = records
         for f in range(lo, hi):         # rows copied into stack scratch, not viewed (views are reference counted)
             c = cell[f]
             for i in range(d):
                 n[i] = N[f, i]
             recorded = state[c] != 0
             if every or recorded:           # the cell's record: its state, the impedance along this face
-                if not _copy_side(rec, state, c, local[f] % slots, q, Z, d):
+                if not _copy_side(rec, state, c, local[f] % slots, Q, rows[c], q, Z, d):
                     return f - lo
                 if ctu:                     # and its split part, for the corrections
                     _copy_record(rec, c, r, d, slots, True)
