@@ -469,3 +469,30 @@ def test_compile_times_records_each_compilation_once_with_its_depth():
     assert all(0 < records[k][0] <= records[k + 1][0] for k in (0, 2))     # inside its caller's time
     front, llvm = script.split(outer)
     assert front > 0 and llvm > 0 and script.name(outer).endswith("outer")
+
+
+def test_trees_in_one_process_copies_a_tree_that_steps_to_the_same_bits(tmp_path, monkeypatch):
+    """bench/trees_in_one_process.py: the working tree copied as the package ``skdgmpm_rev``
+    (every import renamed: none reaches back into ``skdgmpm``) steps the bench plate to the
+    installed package's bits, in the same process."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    path = Path(__file__).parent.parent / "bench" / "trees_in_one_process.py"
+    spec = importlib.util.spec_from_file_location("trees_in_one_process", path)
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    package = script.copy_of(".", tmp_path)
+    assert not [p for p in package.rglob("*.py") if "from skdgmpm." in p.read_text() or "import skdgmpm\n" in p.read_text()]
+    monkeypatch.syspath_prepend(str(tmp_path))
+    try:
+        (a, _), (b, _) = (script.stepping(name, "dgmpm-dcu", 16) for name in ("skdgmpm", script.NAME))
+        for _ in range(3):
+            a()
+            b()
+        assert type(b.stepper).__module__ == f"{script.NAME}.dgmpm"
+        assert a.state.U.tobytes() == b.state.U.tobytes() and a.state.Q.tobytes() == b.state.Q.tobytes()
+    finally:
+        for name in [m for m in sys.modules if m == script.NAME or m.startswith(script.NAME + ".")]:
+            del sys.modules[name]
