@@ -14,7 +14,9 @@ medians of the per-round ratios rev / this (above 1: this tree is faster).
 
 Two trees in two processes, stepped in turn, read up to x1.14 apart on unchanged code: one
 process's idle OpenMP threads still spin while the other steps. Here both trees' passes share
-numba's threads. Each tree keeps its own kernel cache (its sources' digest). Timings are
+numba's threads. Each tree keeps its own kernel cache (its sources' digest) and registers its
+own compile listener with numba (`kernel_cache.Vectorise`): the two restore numba's SLP setting
+out of order, which is why the copy is loaded only in a process of its own. Timings are
 measurements on the machine at hand, not test results.
 """
 import argparse
