@@ -94,9 +94,10 @@ def _add_boundary_edges(edge_bnd, f, G_0, G_1, corr_bnd):
 # the cell (``slots``) its impedance Z = sqrt(rho A_n) (d * d each); then, for CTU's split only,
 # 1 / rho, the tangent C (d^4) and per face direction Z^-1 (d * d each). DCU's records stop
 # after the face part (14 numbers in 2D, not 39: the bytes a record pass writes). The cell
-# records keep the two parts in two arrays, ``rec`` = (face parts, split parts): the face pass
-# reads 112 bytes of each of its cells' rows, in rows of 112 bytes, not of 312 (the split part
-# between them would be half the lines it pulls from memory).
+# records keep the two parts in two arrays, ``rec`` = (face parts, split parts), and of the face
+# part only the impedances (`kept_width`): q is Q's row of the cell (`_copy_state`). The face pass
+# reads 64 bytes of each of its cells' record rows, in rows of 64 bytes, not of 312 (the split
+# part between them would be half the lines it pulls from memory), and 48 of Q's.
 @njit(cache=True, inline="always")
 def face_width(d, slots):
     """Entries of a side record's face part: its state q and its impedances."""
