@@ -31,7 +31,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-PACKAGES = {"skdgmpm": "", "forms": "forms", "materials": "materials", "cases": "cases"}   # folder: where in the package
+PACKAGES = {"skdgmpm": "", "forms": "forms", "materials": "materials", "cases": "cases"}   # folder: its place inside
 NAME = "skdgmpm_rev"
 ORDER = (("A", 1), ("B", 2), ("B", 1), ("A", 2), ("B", 1), ("A", 2), ("A", 1), ("B", 2))
 

@@ -376,7 +376,8 @@ class DGMPM(GodunovScheme):
             n_L = n_R = np.zeros((0, 2, 2))
 
         interior = interior_pass(T_L, T_R, grid_state.U, grid_state.Q, rho, f.normal, f.cell_L, f.cell_R,
-                                 self.cell_material, *laws, (rec, state, normals, k_L, k_R, recorded, self.trace_path, self.state_rows),
+                                 self.cell_material, *laws,
+                                 (rec, state, normals, k_L, k_R, recorded, self.trace_path, self.state_rows),
                                  ctu, (h_L, n_L), (h_R, n_R), flux, G)
         boundary, (flux_b, t_s, v_s, parts) = self.boundary_pass(grid_state, time)
         face_passes(interior, boundary, together=not self.trace_path)
@@ -410,8 +411,8 @@ class DGMPM(GodunovScheme):
         run = boundary_faces(self.traces["boundary"], grid_state.U, grid_state.Q, self.density, b.normal, b.cell_L,
                              self.cell_material, *self.laws, (g.frame, g.velocity, g.values_at(time), g.copy), ctu,
                              self.topology["boundary"],
-                             (rec, state, self.cell_normals, self.boundary_local_face, self.trace_path, self.state_rows), flux, t_s,
-                             v_s, parts)
+                             (rec, state, self.cell_normals, self.boundary_local_face, self.trace_path,
+                              self.state_rows), flux, t_s, v_s, parts)
         return run, (flux, t_s, v_s, parts)
 
     @stage

@@ -532,8 +532,8 @@ def boundary_faces(T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, c
     rec, state, normals, local, traces, rows = records
     kernel = _boundary_faces(N.shape[1], normals.shape[1], bool(traces), only_law(laws))
     return parallel.Pass(len(N), kernel, "lh" + "w" * 17,
-                         (T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo, (rec, state, local, rows),
-                          flux, t_s, v_s, parts), "first", max(1, parallel.MIN_ROWS // 8))
+                         (T, U, Q, rho, N, cell, cell_material, laws, params, ghosts, ctu, topo,
+                          (rec, state, local, rows), flux, t_s, v_s, parts), "first", max(1, parallel.MIN_ROWS // 8))
 
 
 @kernel_factory
