@@ -32,15 +32,18 @@ The speed-up of two rows on different thread counts swings as much on a shared h
 over rounds for the same code), so with several thread counts, one thread among them, every
 method but the peer's also gets a paired scaling measurement at each size (`measure_threads`):
 one more fresh process builds the plate once and steps one simulation, switching the thread
-count between steps (the same bits for any count), one step per count a round, the rounds in
-the order of the counts and reversed in turn (ABBA for 1, 2), `pairs_for` timed rounds after
-``warmup``. Its speed-up on t threads is taken between steps milliseconds apart: each round's
-step on one thread over its step on t. (A step after a switch starts with the caches the other
-count left; at 256^2 a step's arrays are far past a core's own caches.) It costs
-len(threads) x (pairs + warmup) steps per method and size, ~10 s for ADER at 256^2. The JSON adds
+count between steps (the same bits for any count), one timed step per count a round, the
+rounds in the order of the counts and reversed in turn (ABBA for 1, 2), `pairs_for` timed rounds
+after ``warmup``. Its speed-up on t threads is taken between steps milliseconds apart: each
+round's step on one thread over its step on t. Each timed step follows `SETTLE` untimed steps on
+its own count, as every step of a run does: the first step after a switch starts with the caches
+the other count left and, on several threads, with numba's workers asleep (on 6 ms steps that
+cost the two-thread step 3-8 %). It costs len(threads) x (1 + SETTLE) x (pairs + warmup) steps
+per method and size, ~20 s for ADER at 256^2. The JSON adds
 a top-level ``threads_paired`` list, one dict per (method, size): ``method``, ``cells``,
-``threads`` (the counts, [1, 2]), ``pairs``, ``warmup``, ``order``; for each clock (``wall``,
-``cpu``) and each count t > 1 (keys are strings, "2"), the quartiles of the per-round speed-ups
+``threads`` (the counts, [1, 2]), ``pairs``, ``warmup``, ``order``, ``settle``; for each clock
+(``wall``, ``cpu``, and ``switch_wall``: the wall time of the first step after each switch) and
+each count t > 1 (keys are strings, "2"), the quartiles of the per-round speed-ups
 (``wall_speedup``: {"2": {"q25", "median", "q75", "medians_ratio"}}, the last the median step on
 one thread over the median step on t; on the ``cpu`` clock below 1 by the core time the threads
 add), the median step of each count (``wall_step_s``: {"1", "2"}) and every timed step
@@ -56,6 +59,8 @@ import threading
 import time
 
 import numpy as np
+
+from typing import NamedTuple
 
 from . import peer
 from .bench_kernels import arithmetic_rows
@@ -256,17 +261,36 @@ class Stepping:
         self.state = self.stepper.step(self.state)
 
 
+# Untimed steps on a thread count after each switch, before its timed step: a run steps on one
+# count, while the first step after a switch starts with the other count's caches and, from one
+# thread to several, numba's workers asleep (a DGMPM CTU step at 256^2 on two threads: 5.84 ms
+# after a step on two, 5.99 after one on one, 6.33 after the probe's pause; docs/bench/session54.md)
+SETTLE = 1
+
+
+class Alternated(NamedTuple):
+    """What `alternate_threads` measured: the CPU and wall times of the timed steps (len(threads),
+    pairs), the final state, the probe's wall times (len(threads), pairs; None without the probe)
+    and the wall times of the untimed first step after each switch (len(threads), pairs)."""
+    cpu: np.ndarray
+    wall: np.ndarray
+    state: object
+    probe: object
+    switched: np.ndarray
+
+
 def alternate_threads(disc, threads, pairs, warmup, probe_rounds=0):
     """Step the one simulation of ``disc`` (a `build.build` result) on each of the thread counts
-    ``threads`` in turn (`alternate`: one step per count a round; any count gives the same bits).
-    Returns the CPU and wall times (len(threads), pairs) and the final state; the thread setting
-    is restored. With ``probe_rounds``, each round also runs the arithmetic probe's work
-    (`_ArithmeticPass`, that many rounds) on each count, among the steps (ABBA): also returns
-    its wall times (len(threads), pairs), what the machine gave the threads in those rounds."""
+    ``threads`` in turn (`alternate`: one timed step per count a round, any count giving the same
+    bits), each after one step of its own count that settles the switch (`SETTLE`), timed apart.
+    Returns an `Alternated`; the thread setting is restored. With ``probe_rounds``, each round also
+    runs the arithmetic probe's work (`_ArithmeticPass`, that many rounds) on each count, among the
+    steps (ABBA): its wall times are what the machine gave the threads in those rounds."""
     from . import parallel
 
     step, T = Stepping(disc), len(threads)
     sides = [step] * T + ([_ArithmeticPass(t, probe_rounds) for t in threads] if probe_rounds else [])
+    switched = [[] for _ in threads]
 
     def before(i):
         if i >= T:              # where the pool runs the probe, on workers started for it (`parallel.restart`)
@@ -274,15 +298,18 @@ def alternate_threads(disc, threads, pairs, warmup, probe_rounds=0):
         _use_threads(threads[i % T])
         if i >= T:              # numba's threads, spinning after a compiled chunk loop, gone to sleep
             time.sleep(PROBE_PAUSE_S)
+        else:
+            switched[i].append(_timed(step))
+            for _ in range(SETTLE - 1):
+                step()
 
     previous = parallel.set_threads(1)
     try:
         cpu, wall = alternate(sides, pairs, warmup, before=before)
     finally:
         parallel.set_threads(previous)
-    if probe_rounds:
-        return cpu[:T], wall[:T], step.state, wall[T:]
-    return cpu, wall, step.state
+    switched = np.array([s[warmup:] for s in switched])
+    return Alternated(cpu[:T], wall[:T], step.state, wall[T:] if probe_rounds else None, switched)
 
 
 def measure_threads_here(method, n, threads, steps, warmup):
@@ -295,11 +322,11 @@ def measure_threads_here(method, n, threads, steps, warmup):
 
     disc = build(scene_for(method, n))
     pairs = pairs_for(steps)
-    cpu, wall, _, probe = alternate_threads(disc, threads, pairs, warmup, probe_rounds=PROBE_ROUNDS)
+    cpu, wall, _, probe, switched = alternate_threads(disc, threads, pairs, warmup, probe_rounds=PROBE_ROUNDS)
     one = threads.index(1)
     row = {"method": method, "cells": int(disc.stepper.grid.submesh.nelements), "threads": list(threads),
-           "pairs": pairs, "warmup": warmup, "order": "ABBA"}
-    for clock, times in (("wall", wall), ("cpu", cpu)):
+           "pairs": pairs, "warmup": warmup, "order": "ABBA", "settle": SETTLE}
+    for clock, times in (("wall", wall), ("cpu", cpu), ("switch_wall", switched)):
         speedup = {str(t): ratios(times[one], times[i]) for i, t in enumerate(threads) if i != one}
         row.update({f"{clock}_speedup": speedup,
                     f"{clock}_step_s": {str(t): float(np.median(times[i])) for i, t in enumerate(threads)},
@@ -603,6 +630,9 @@ def format_threads_pair(p):
                       f"medians {s['medians_ratio']:.2f}: {1e3 * one:.2f} / {1e3 * p['wall_step_s'][t]:.2f} ms "
                       "per step)" for t, s in p["wall_speedup"].items())
     line = f"{head}: {parts}; medians of {p['pairs']} per-round speed-ups, {p['order']} order"
+    if "switch_wall_speedup" in p:      # the untimed steps that settled each switch, timed apart
+        first = ", ".join(f"x{s['median']:.2f}" for s in p["switch_wall_speedup"].values())
+        line += f", each after a step on its own count (the first after each switch: {first})"
     if "share_of_probe" in p:           # what the machine gave in the same rounds
         gave = ", ".join(f"{t} threads x{p['probe_speedup'][t]['median']:.2f}, the step {s['median']:.2f} of it "
                          f"(quartiles {s['q25']:.2f}-{s['q75']:.2f})" for t, s in p["share_of_probe"].items())

@@ -55,9 +55,10 @@ def test_bench_measures_each_thread_count(tmp_path, capsys):
 
 
 def test_paired_thread_scaling_steps_one_simulation(monkeypatch):
-    """The paired scaling switches the thread count between the steps of one simulation: its fields
-    are sane, and its final state has the bits of the same steps all on one thread. The chunk
-    length is lowered so that 8 x 8 is split into chunks, as 256^2 is."""
+    """The paired scaling switches the thread count between the steps of one simulation, each timed
+    step after `SETTLE` untimed ones on its own count: its fields are sane, and its final state has
+    the bits of the same steps all on one thread. The chunk length is lowered so that 8 x 8 is
+    split into chunks, as 256^2 is."""
     from skdgmpm import parallel
     from skdgmpm.build import build
 
@@ -67,8 +68,8 @@ def test_paired_thread_scaling_steps_one_simulation(monkeypatch):
         row = bench.measure_threads_here("dgmpm-ctu", 8, [1, 2], steps=3, warmup=1)
         assert parallel.threads() == 3                          # the setting is restored
         assert row["cells"] == 64 and row["threads"] == [1, 2] and row["order"] == "ABBA"
-        assert row["pairs"] == bench.pairs_for(3) == bench.PAIRS
-        for clock in ("wall", "cpu"):
+        assert row["pairs"] == bench.pairs_for(3) == bench.PAIRS and row["settle"] == bench.SETTLE >= 1
+        for clock in ("wall", "cpu", "switch_wall"):
             assert set(row[f"{clock}_s"]) == {"1", "2"} and set(row[f"{clock}_speedup"]) == {"2"}
             assert all(len(ts) == row["pairs"] and min(ts) > 0 for ts in row[f"{clock}_s"].values())
             s = row[f"{clock}_speedup"]["2"]
@@ -82,23 +83,24 @@ def test_paired_thread_scaling_steps_one_simulation(monkeypatch):
         per_round = (np.array(row["wall_s"]["1"]) / row["wall_s"]["2"]) / probe
         assert np.isclose(share["median"], np.median(per_round), rtol=1e-12)
         disc = build(bench.scene_for("dgmpm-ctu", 8))
-        _, wall, alternated = bench.alternate_threads(disc, [1, 2], 4, warmup=1)
-        assert wall.shape == (2, 4)
+        measured = bench.alternate_threads(disc, [1, 2], 4, warmup=1)
+        assert measured.wall.shape == measured.switched.shape == (2, 4) and measured.probe is None
+        alternated = measured.state
         parallel.set_threads(1)
         ordinary = build(bench.scene_for("dgmpm-ctu", 8))
         state = ordinary.initial
-        for _ in range(2 * (4 + 1)):
+        for _ in range(2 * (1 + bench.SETTLE) * (4 + 1)):
             state = ordinary.stepper.step(state)
     finally:
         parallel.set_threads(previous)
-    assert alternated.step == state.step == 10 and alternated.t == state.t
+    assert alternated.step == state.step == 2 * (1 + bench.SETTLE) * 5 and alternated.t == state.t
     assert np.all(np.isfinite(state.U)) and np.array_equal(alternated.U, state.U)
 
 
 @pytest.mark.parametrize("method, J_min", [("dgmpm-ctu-j2", 0.9), ("ader-dgmpm-3", 0.5)])
 def test_plate_outlasts_a_paired_measurement(method, J_min):
     """The rows' plate steps as long as a paired measurement on 1, 2, 4, 8 and 16 threads takes
-    (5 x (30 + 2) steps) and stays admissible. Before, the edge of the driven zone, where 1000
+    (5 x (1 + SETTLE) x (30 + 2) steps) and stays admissible. Before, the edge of the driven zone, where 1000
     m/s meets the free face, inverted on every grid and the paired row failed: the small-strain
     J2 law after 51 steps on this 16 x 16 grid (69 on 32 x 32, 54 on 128 x 128 and 256 x 256;
     now driven at plate_impact_j2_2d's 50 m/s), unlimited ADER-DGMPM S3T3 after 49 on 16 x 16,
@@ -107,7 +109,7 @@ def test_plate_outlasts_a_paired_measurement(method, J_min):
 
     disc = build(bench.scene_for(method, 16))
     state = disc.initial
-    for _ in range(5 * (bench.PAIRS + 2)):
+    for _ in range(5 * (1 + bench.SETTLE) * (bench.PAIRS + 2)):
         state = disc.stepper.step(state)
     assert np.all(np.isfinite(state.U)) and state.health["min_J"] > J_min
 
@@ -129,6 +131,11 @@ def test_paired_scaling_line():
                 share_of_probe={"2": {"q25": 0.9, "median": 0.954, "q75": 0.99, "medians_ratio": 0.95}})
     assert bench.format_threads_pair(pair) == pair_line + ("; in the same rounds the arithmetic probe gave 2 threads "
                                                            "x1.70, the step 0.95 of it (quartiles 0.90-0.99)")
+    pair.update(switch_wall_speedup={"2": {"q25": 1.4, "median": 1.512, "q75": 1.6, "medians_ratio": 1.5}})
+    assert bench.format_threads_pair(pair) == pair_line + (", each after a step on its own count (the first after each "
+                                                           "switch: x1.51); in the same rounds the arithmetic probe "
+                                                           "gave 2 threads x1.70, the step 0.95 of it (quartiles "
+                                                           "0.90-0.99)")
     failed = {"method": "ader-dgmpm-1", "cells": 64, "threads": [1, 2], "error": "boom"}
     assert bench.format_scaling([], [failed]).endswith("alternating thread counts in one process: failed: boom")
 
