@@ -66,6 +66,15 @@ def _inverse_transpose(F):
                      (b * f - c * e) * r, (c * d - a * f) * r, (a * e - b * d) * r)
 
 
+@njit(cache=True, inline="always")
+def determinant(F):
+    """det F of one (3, 3) F, expanded along its first row as `_inverse_transpose` expands it."""
+    a, b, c = F[0, 0], F[0, 1], F[0, 2]
+    d, e, f = F[1, 0], F[1, 1], F[1, 2]
+    g, h, i = F[2, 0], F[2, 1], F[2, 2]
+    return a * (e * i - f * h) + b * (f * g - d * i) + c * (d * h - e * g)
+
+
 def cofactor(F):
     """Cofactor matrix cof F = det(F) F^-T and det F of ``(..., 3, 3)`` arrays, in closed form
     (a compiled loop over the points; det F = 0 gives cof F anyway)."""
@@ -95,13 +104,16 @@ class PointLaw(NamedTuple):
     tangent the Riemann solver and the wave-speed check use (possibly another law's function: the
     laws then share a branch of the dispatch), and either ``stress(F, prm, P, d)`` (hyperelastic)
     or ``update(F, prm, h_n, h, P, d)`` (a law with history: its return mapping);
-    ``stress_tangent(F, prm, P, C, d)`` where computing both at once is cheaper than apart.
-    `materials.points` makes every kernel's dispatch from these."""
+    ``stress_tangent(F, prm, P, C, d)`` where computing both at once is cheaper than apart;
+    ``energy(F, prm, h, W, d)``, every law's: W[0] = the stored (recoverable) energy density at F
+    with the internal variables h in force (zero wide for a hyperelastic law), +inf where the law
+    is undefined (J <= 0). `materials.points` makes every kernel's dispatch from these."""
 
     tangent: object
     stress: object = None
     update: object = None
     stress_tangent: object = None
+    energy: object = None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -117,7 +129,7 @@ class Material(ABC):
     rho : float
         Reference mass density rho0 (kg/m^3), > 0.
 
-    Subclasses implement `first_piola`, `energy` and their compiled point functions, the class
+    Subclasses implement `first_piola` and their compiled point functions, the class
     attribute ``point_law`` (`PointLaw`), under their ``law_id`` (with ``law_parameters``);
     the law is registered by its row in `materials.LAWS`. The batched tangent,
     acoustic tensor, wave speeds, hyperbolicity and Cauchy stress follow from them.
@@ -152,10 +164,14 @@ class Material(ABC):
     def first_piola(self, F):
         """First Piola-Kirchhoff stress P(F), shape ``(..., 3, 3)`` (Pa)."""
 
-    @abstractmethod
-    def energy(self, F):
-        """Stored energy density W(F) per reference volume, shape ``(...,)`` (J/m^3); P = dW/dF.
-        A law with internal variables takes ``energy(F, history)``: the recoverable (elastic) part."""
+    def energy(self, F, history=None):
+        """Stored (recoverable) energy density W per reference volume at F (..., 3, 3), shape
+        ``(...,)`` (J/m^3), with the internal variables ``history`` in force ((..., n_history) or
+        one row for every point; None: the virgin state; a hyperelastic law has none); P = dW/dF
+        at that history; +inf where the law is undefined (J <= 0). The law's compiled point
+        energy (`PointLaw`) looped over the points (`materials.points.energy`), as a run sums it."""
+        from .points import energy                  # points imports every law, hence here
+        return energy(self, F, history)
 
     def tangent(self, F):
         """Analytic tangent C = dP/dF, shape ``(..., 3, 3, 3, 3)`` (Pa)."""

@@ -60,6 +60,19 @@ def tangent_point(F, prm, C, d):
                     C[i, a, j, b] = (c_vol * GG - c_vol_x * GG_x) + c_iso * d2I1b + 2 * w2 * (dI_ia * dI_jb)
 
 
+@njit(cache=True, inline="always")
+def energy_point(F, prm, h, W, d):
+    """W[0] = kappa/2 (J - 1)^2 + w1 (I1b - 3) + w2 (I1b^2 - 9) at one embedded F (3, 3), I1b =
+    J^(-2/3) tr(F^T F), +inf where J <= 0; prm = (kappa, w1, w2)."""
+    kappa, w1, w2 = prm[0], prm[1], prm[2]
+    ok, J, _, I1, s = _kinematics(F)
+    if ok:
+        I1b = s * I1
+        W[0] = 0.5 * kappa * (J - 1.0) ** 2 + w1 * (I1b - 3.0) + w2 * (I1b * I1b - 9.0)
+    else:
+        W[0] = np.inf
+
+
 @dataclass(frozen=True, kw_only=True)
 class Gavrilyuk(Material):
     """W = kappa/2 (J - 1)^2 + mu/4 [-2a (I1b - 3) + (1 + a)/3 (I1b^2 - 9)] [L23 eq 16-17].
@@ -106,17 +119,11 @@ class Gavrilyuk(Material):
                 + (w1 + 2 * w2 * I1b)[..., None, None] * dI1b)
 
     law_id = 3
-    point_law = PointLaw(tangent_point, stress=stress_point)
+    point_law = PointLaw(tangent_point, stress=stress_point, energy=energy_point)
 
     @property
     def law_parameters(self):
         return (self.bulk, *self._weights)
-
-    def energy(self, F):
-        F, J, G, I1, I1b, dI1b, ok = self._kinematics(F)
-        w1, w2 = self._weights
-        W = 0.5 * self.bulk * (J - 1.0) ** 2 + w1 * (I1b - 3.0) + w2 * (I1b**2 - 9.0)
-        return np.where(ok, W, np.inf)
 
     def is_hyperbolic(self, F, N):
         return super().is_hyperbolic(F, N) & (cofactor(np.asarray(F, dtype=float))[1] > 0.0)

@@ -11,15 +11,10 @@ from skdgmpm.kernel_cache import scratch
 from . import neo_hookean
 from .base import PointLaw, _inverse_transpose, admissible_inverse
 from .j2_plasticity import _SYMMETRIC, J2Material
+from .j2_plasticity import history_column as _column
 from .neo_hookean import NeoHookean
 
 _I = np.eye(3)
-
-
-@njit(cache=True, inline="always")
-def _column(i, j):
-    """Column of the history holding the symmetric entry (i, j): 11, 22, 33, 12, 13, 23 -> 1 ... 6."""
-    return 1 + i if i == j else 3 + i + j
 
 
 @njit(cache=True, inline="always")
@@ -67,6 +62,20 @@ def _eigh(A, V):
 
 
 @njit(cache=True, inline="always")
+def _copy_inputs(F, prm, h, F_c, prm_c, h_c):
+    """F (3, 3), prm (4,) and a history h (7,) copied into the caller's stack scratch F_c, prm_c,
+    h_c, which a called body takes: the caller's own arrays then do not escape into the call
+    (`points.tangent_call`)."""
+    for i in range(3):
+        for a in range(3):
+            F_c[i, a] = F[i, a]
+    for k in range(4):
+        prm_c[k] = prm[k]
+    for k in range(7):
+        h_c[k] = h[k]
+
+
+@njit(cache=True, inline="always")
 def stress_update_point(F, prm, h_n, h, P, d):
     """Return mapping at one embedded F (3, 3) of t_{n+1}: d-block P (d, d) of P = tau F^-T and
     the history h (7,) from that of t_n, h_n (7,) = (eqp, Cp^-1 11, 22, 33, 12, 13, 23) (read before
@@ -81,19 +90,59 @@ def stress_update_point(F, prm, h_n, h, P, d):
     call takes no size, so it compiles once for every dimension (a literal d would be a signature of
     its own)."""
     F_c, prm_c, h_n_c, h_c, P_c = scratch((3, 3)), scratch((4,)), scratch((7,)), scratch((7,)), scratch((3, 3))
-    for i in range(3):
-        for a in range(3):
-            F_c[i, a] = F[i, a]
-    for k in range(4):
-        prm_c[k] = prm[k]
-    for k in range(7):
-        h_n_c[k] = h_n[k]
+    _copy_inputs(F, prm, h_n, F_c, prm_c, h_n_c)
     _return_mapping(F_c, prm_c, h_n_c, h_c, P_c)
     for k in range(7):
         h[k] = h_c[k]
     for i in range(d):
         for a in range(d):
             P[i, a] = P_c[i, a]
+
+
+@njit(cache=True, inline="always")
+def _elastic_trial(F, h_n, A, V):
+    """The eigenvalues of be_trial = F Cp^-1 F^T on A's diagonal and its eigenvectors in V's
+    columns (A, V (3, 3) scratch), Cp^-1 that of the history h_n (7,)."""
+    W = scratch((3, 3))
+    for i in range(3):                  # W = F Cp^-1_n, then A = be_trial = W F^T (symmetric)
+        for b in range(3):
+            s = 0.0
+            for k in range(3):
+                s += F[i, k] * h_n[_column(k, b)]
+            W[i, b] = s
+    for i in range(3):
+        for j in range(i, 3):
+            s = 0.0
+            for b in range(3):
+                s += W[i, b] * F[j, b]
+            A[i, j] = s
+            A[j, i] = s
+    _eigh(A, V)
+
+
+@njit(cache=True)
+def _stored(F, prm, h):
+    """`energy_point`'s body, compiled on its own (the Jacobi sweeps, as `_return_mapping`)."""
+    mu, lam = prm[0], prm[1]
+    ok, _, _ = _inverse_transpose(F)
+    if not ok:
+        return np.inf
+    A, V = scratch((3, 3)), scratch((3, 3))
+    _elastic_trial(F, h, A, V)
+    e0, e1, e2 = 0.5 * np.log(A[0, 0]), 0.5 * np.log(A[1, 1]), 0.5 * np.log(A[2, 2])
+    tr = e0 + e1 + e2
+    m = tr / 3.0
+    return mu * ((e0 - m) ** 2 + (e1 - m) ** 2 + (e2 - m) ** 2) + 0.5 * (lam + 2.0 * mu / 3.0) * tr * tr
+
+
+@njit(cache=True, inline="always")
+def energy_point(F, prm, h, W, d):
+    """W[0] = mu |dev log Ve|^2 + kappa/2 (tr log Ve)^2 at one embedded F (3, 3), log Ve = 1/2 log be,
+    be = F Cp^-1 F^T with Cp^-1 of the history h (7,) in force, +inf where det F <= 0; prm = (mu,
+    lam, sigma_y, H). Called through stack copies, as `stress_update_point`."""
+    F_c, prm_c, h_c = scratch((3, 3)), scratch((4,)), scratch((7,))
+    _copy_inputs(F, prm, h, F_c, prm_c, h_c)
+    W[0] = _stored(F_c, prm_c, h_c)
 
 
 @njit(cache=True)
@@ -110,20 +159,7 @@ def _return_mapping(F, prm, h_n, h, P):
                 P[i, a] = 0.0
         return
     A, V, W = scratch((3, 3)), scratch((3, 3)), scratch((3, 3))
-    for i in range(3):                  # W = F Cp^-1_n, then A = be_trial = W F^T (symmetric)
-        for b in range(3):
-            s = 0.0
-            for k in range(3):
-                s += F[i, k] * h_n[_column(k, b)]
-            W[i, b] = s
-    for i in range(3):
-        for j in range(i, 3):
-            s = 0.0
-            for b in range(3):
-                s += W[i, b] * F[j, b]
-            A[i, j] = s
-            A[j, i] = s
-    _eigh(A, V)
+    _elastic_trial(F, h_n, A, V)
     e0, e1, e2 = 0.5 * np.log(A[0, 0]), 0.5 * np.log(A[1, 1]), 0.5 * np.log(A[2, 2])
     # the small-strain radial return on principal log strains and Kirchhoff stresses
     tr = e0 + e1 + e2
@@ -202,7 +238,7 @@ class HenckyJ2(J2Material):
     """
 
     law_id = 5
-    point_law = PointLaw(neo_hookean.tangent_point, update=stress_update_point)
+    point_law = PointLaw(neo_hookean.tangent_point, update=stress_update_point, energy=energy_point)
     history_names = ("eqp", "Cpi11", "Cpi22", "Cpi33", "Cpi12", "Cpi13", "Cpi23")
     _stress_updates = _stress_updates
 
@@ -232,18 +268,6 @@ class HenckyJ2(J2Material):
         be = F @ Cpi @ np.swapaxes(F, -1, -2)
         lam_A, N = np.linalg.eigh(0.5 * (be + np.swapaxes(be, -1, -2)))
         return F, G, ok, Cpi, lam_A, N
-
-    def energy(self, F, history=None):
-        """Stored elastic energy mu |dev log Ve|^2 + kappa/2 (tr log Ve)^2, log Ve = 1/2 log be,
-        be = F Cp^-1 F^T, shape ``(...,)`` (J/m^3), with the history in force at F (``None``:
-        virgin); P = dW/dF at that history. +inf where J <= 0."""
-        history = self.initial_history(1)[0] if history is None else history
-        _, _, ok, _, lam_A, _ = self._trial(F, history)
-        e = 0.5 * np.log(lam_A)
-        tr = e.sum(axis=-1)
-        dev = e - tr[..., None] / 3.0
-        W = self.mu * (dev**2).sum(axis=-1) + 0.5 * self.bulk * tr**2
-        return np.where(ok, W, np.inf)
 
     def consistent_tangent(self, F, history):
         """dP_{n+1}/dF_{n+1} of the return mapping from the history of t_n, shape

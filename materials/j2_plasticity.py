@@ -69,6 +69,28 @@ def _stress_updates(F, prm, h_n, h, P):
         stress_update_point(F[p], prm, h_n[p], h[p], P[p], 3)
 
 
+@njit(cache=True, inline="always")
+def history_column(i, j):
+    """Column of a J2 law's history holding the symmetric entry (i, j) of its tensor (`_SYMMETRIC`):
+    11, 22, 33, 12, 13, 23 -> 1 ... 6."""
+    return 1 + i if i == j else 3 + i + j
+
+
+@njit(cache=True, inline="always")
+def energy_point(F, prm, h, W, d):
+    """W[0] = lam/2 tr(e)^2 + mu e:e at one embedded F (3, 3), e = sym(F - I) - eps_p, with the
+    plastic strain of the history h (7,) in force; prm = (mu, lam, sigma_y, H)."""
+    mu, lam = prm[0], prm[1]
+    tr, ee = 0.0, 0.0
+    for i in range(3):
+        for a in range(3):
+            e = 0.5 * ((F[i, a] - (i == a)) + (F[a, i] - (i == a))) - h[history_column(i, a)]
+            ee += e * e
+            if i == a:
+                tr += e
+    W[0] = 0.5 * lam * tr * tr + mu * ee
+
+
 @dataclass(frozen=True, kw_only=True)
 class J2Material(Material):
     """Von Mises yield with linear isotropic hardening, the parameters and batched methods shared
@@ -154,7 +176,7 @@ class J2Plasticity(J2Material):
     """
 
     law_id = 4
-    point_law = PointLaw(linear_elastic.tangent_point, update=stress_update_point)
+    point_law = PointLaw(linear_elastic.tangent_point, update=stress_update_point, energy=energy_point)
     history_names = ("eqp", "ep11", "ep22", "ep33", "ep12", "ep13", "ep23")
     _stress_updates = _stress_updates
 
@@ -176,14 +198,6 @@ class J2Plasticity(J2Material):
         s = 2.0 * self.mu * (e - np.trace(e, axis1=-2, axis2=-1)[..., None, None] / 3.0 * _I)
         q = np.sqrt(1.5 * np.einsum("...ij,...ij->...", s, s))
         return e, s, q, q - (self.sigma_y + self.H * np.asarray(history, dtype=float)[..., 0])
-
-    def energy(self, F, history=None):
-        """Stored elastic energy 1/2 (eps - eps_p):C:(eps - eps_p), shape ``(...,)`` (J/m^3), with the
-        history in force at F (``None``: virgin); P = dW/dF at that history."""
-        history = self.initial_history(1)[0] if history is None else history
-        e = self._trial(F, history)[0]
-        tr = np.trace(e, axis1=-2, axis2=-1)
-        return 0.5 * self.lam * tr**2 + self.mu * np.einsum("...ab,...ab->...", e, e)
 
     def consistent_tangent(self, F, history):
         """dP_{n+1}/dF_{n+1} of the return mapping from the history of t_n, shape

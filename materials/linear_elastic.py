@@ -35,6 +35,19 @@ def tangent_point(F, prm, C, d):
                     C[i, a, j, b] = lam * ((i == a) * (j == b)) + mu * ((i == j) * (a == b) + (i == b) * (a == j))
 
 
+@njit(cache=True, inline="always")
+def energy_point(F, prm, h, W, d):
+    """W[0] = lam/2 tr(eps)^2 + mu eps:eps at one embedded F (3, 3), eps = sym(F - I); prm = (mu, lam)."""
+    mu, lam = prm[0], prm[1]
+    tr, ee = 0.0, 0.0
+    for i in range(3):
+        tr += F[i, i] - 1.0
+        for a in range(3):
+            eps = 0.5 * ((F[i, a] - (i == a)) + (F[a, i] - (i == a)))
+            ee += eps * eps
+    W[0] = 0.5 * lam * tr * tr + mu * ee
+
+
 @dataclass(frozen=True, kw_only=True)
 class LinearElastic(Material):
     """Linear elastic law: P = lam tr(eps) I + 2 mu eps, eps = sym(F - I).
@@ -53,13 +66,8 @@ class LinearElastic(Material):
         return self.lam * tr[..., None, None] * _I + 2.0 * self.mu * eps
 
     law_id = 1
-    point_law = PointLaw(tangent_point, stress=stress_point)
+    point_law = PointLaw(tangent_point, stress=stress_point, energy=energy_point)
 
     @property
     def law_parameters(self):
         return (self.mu, self.lam)
-
-    def energy(self, F):
-        eps = self._strain(F)
-        tr = np.trace(eps, axis1=-2, axis2=-1)
-        return 0.5 * self.lam * tr**2 + self.mu * np.einsum("...ab,...ab->...", eps, eps)

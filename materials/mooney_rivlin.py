@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .base import Material, PointLaw, _check_parameter, _inverse_transpose, admissible_inverse, cofactor
+from .base import Material, PointLaw, _check_parameter, _inverse_transpose, cofactor, determinant
 
 
 @njit(cache=True, inline="always")
@@ -76,6 +76,29 @@ def _first_piola(F, prm, P):
         stress_point(F[p], prm, P[p], 3)
 
 
+@njit(cache=True, inline="always")
+def energy_point(F, prm, h, W, d):
+    """W[0] = c1 (I1 - 3) + c2 (I2 - 3) - m ln J + lam/2 (ln J)^2 at one embedded F (3, 3), I1 and I2
+    the invariants of C = F^T F, +inf where J <= 0; prm = (c1, c2, m, lam)."""
+    c1, c2, m, lam = prm[0], prm[1], prm[2], prm[3]
+    J = determinant(F)
+    if J > 0.0:
+        I1, CC = 0.0, 0.0
+        for a in range(3):
+            for b in range(3):
+                s = 0.0
+                for k in range(3):
+                    s += F[k, a] * F[k, b]
+                CC += s * s
+                if a == b:
+                    I1 += s
+        I2 = 0.5 * (I1 * I1 - CC)
+        ln_J = np.log(J)
+        W[0] = c1 * (I1 - 3.0) + c2 * (I2 - 3.0) - m * ln_J + 0.5 * lam * ln_J * ln_J
+    else:
+        W[0] = np.inf
+
+
 @dataclass(frozen=True, kw_only=True)
 class MooneyRivlin(Material):
     """Compressible Mooney-Rivlin law:
@@ -93,7 +116,7 @@ class MooneyRivlin(Material):
     beta: float = 0.5
 
     law_id = 6
-    point_law = PointLaw(tangent_point, stress=stress_point)
+    point_law = PointLaw(tangent_point, stress=stress_point, energy=energy_point)
 
     def __post_init__(self):
         super().__post_init__()
@@ -111,16 +134,6 @@ class MooneyRivlin(Material):
         P = np.empty_like(flat)
         _first_piola(flat, np.array(self.law_parameters), P)
         return P.reshape(F.shape)
-
-    def energy(self, F):
-        c1, c2, m, lam = self.law_parameters
-        F, _, J, ok = admissible_inverse(F)
-        C = np.swapaxes(F, -1, -2) @ F
-        I1 = np.trace(C, axis1=-2, axis2=-1)
-        I2 = 0.5 * (I1**2 - np.einsum("...ab,...ba->...", C, C))
-        lnJ = np.log(J)
-        W = c1 * (I1 - 3.0) + c2 * (I2 - 3.0) - m * lnJ + 0.5 * lam * lnJ**2
-        return np.where(ok, W, np.inf)
 
     def is_hyperbolic(self, F, N):
         return super().is_hyperbolic(F, N) & (cofactor(np.asarray(F, dtype=float))[1] > 0.0)

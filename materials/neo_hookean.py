@@ -5,7 +5,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .base import Material, PointLaw, _inverse_transpose, admissible_inverse, cofactor
+from .base import Material, PointLaw, _inverse_transpose, cofactor, determinant
 
 
 @njit(cache=True, inline="always")
@@ -63,6 +63,23 @@ def stress_tangent_point(F, prm, P, C, d):
     _tangent(G, ln_J, mu, lam, C, d)
 
 
+@njit(cache=True, inline="always")
+def energy_point(F, prm, h, W, d):
+    """W[0] = mu/2 (tr(F^T F) - 3) - mu ln J + lam/2 (ln J)^2 at one embedded F (3, 3), +inf where
+    J <= 0; prm = (mu, lam)."""
+    mu, lam = prm[0], prm[1]
+    J = determinant(F)
+    if J > 0.0:
+        I1 = 0.0
+        for i in range(3):
+            for a in range(3):
+                I1 += F[i, a] * F[i, a]
+        ln_J = np.log(J)
+        W[0] = 0.5 * mu * (I1 - 3.0) - mu * ln_J + 0.5 * lam * ln_J * ln_J
+    else:
+        W[0] = np.inf
+
+
 def _points(F):
     """(n, 3, 3) contiguous float view of F (..., 3, 3) and the batch shape."""
     F = np.asarray(F, dtype=float)
@@ -84,27 +101,17 @@ class NeoHookean(Material):
     """
 
     law_id = 0
-    point_law = PointLaw(tangent_point, stress=stress_point, stress_tangent=stress_tangent_point)
+    point_law = PointLaw(tangent_point, stress=stress_point, stress_tangent=stress_tangent_point, energy=energy_point)
 
     @property
     def law_parameters(self):
         return (self.mu, self.lam)
-
-    def _kinematics(self, F):
-        F, G, J, ok = admissible_inverse(F)
-        return F, G, np.log(J), ok
 
     def first_piola(self, F):
         F, shape = _points(F)
         P = np.empty_like(F)
         _first_piola(F, self.mu, self.lam, P)
         return P.reshape(shape + (3, 3))
-
-    def energy(self, F):
-        Fs, _, lnJ, ok = self._kinematics(F)
-        W = (0.5 * self.mu * (np.einsum("...ia,...ia->...", Fs, Fs) - 3.0)
-             - self.mu * lnJ + 0.5 * self.lam * lnJ**2)
-        return np.where(ok, W, np.inf)
 
     def is_hyperbolic(self, F, N):
         return super().is_hyperbolic(F, N) & (cofactor(np.asarray(F, dtype=float))[1] > 0.0)

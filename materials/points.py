@@ -35,6 +35,9 @@ N_PARAMETERS = 4        # the widest law_parameters
 LAWS = {law.law_id: law.point_law for law in _REGISTERED.values()}
 if len(LAWS) != len(_REGISTERED):
     raise ImportError(f"materials.LAWS: two laws share a law_id ({[law.law_id for law in _REGISTERED.values()]})")
+for _name, _law in _REGISTERED.items():
+    if _law.point_law.energy is None:
+        raise ImportError(f"materials.LAWS: {_name} has no compiled point energy (PointLaw(..., energy=...))")
 KNOWN = tuple(LAWS)
 ANY_LAW = -1
 
@@ -69,11 +72,11 @@ def _parameters(params, m):
 # asks for; `_TAKES`: those of each point function of a `base.PointLaw`, the same but for a
 # law's joint stress and tangent, which takes no history (a law with history has none: it
 # updates, then computes its tangent).
-TANGENT, STRESS, UPDATE, STRESS_TANGENT = range(4)
+TANGENT, STRESS, UPDATE, STRESS_TANGENT, ENERGY = range(5)
 _ARGUMENTS = {TANGENT: ("C", "d"), STRESS: ("P", "d"), UPDATE: ("h_n", "h", "P", "d"),
-              STRESS_TANGENT: ("h_n", "h", "P", "C", "d")}
+              STRESS_TANGENT: ("h_n", "h", "P", "C", "d"), ENERGY: ("h_n", "W", "d")}
 _TAKES = {"tangent": _ARGUMENTS[TANGENT], "stress": _ARGUMENTS[STRESS], "update": _ARGUMENTS[UPDATE],
-          "stress_tangent": ("P", "C", "d")}
+          "stress_tangent": ("P", "C", "d"), "energy": _ARGUMENTS[ENERGY]}
 
 
 def _statements(kind, law):
@@ -89,7 +92,7 @@ def _statements(kind, law):
     stress = None if e.stress is None else call("stress")
     update = call("update") if e.update else stress
     both = call("stress_tangent") if e.stress_tangent else update + tangent
-    return (tangent, stress, update, both)[kind]
+    return (tangent, stress, update, both, call("energy"))[kind]
 
 
 def _branches(kind, laws=KNOWN):
@@ -185,6 +188,13 @@ def stress_tangent_point(laws, params, m, only, F, h_n, h, P, C, d):
     raise TypeError("stress_tangent_point is compiled code's")
 
 
+def energy_point(laws, params, m, only, F, h, W, d):
+    """W[0] = the stored energy density of material m of the law table (laws, params) at one
+    embedded F (3, 3), with the internal variables h (n_history,) in force (zero wide: none);
+    +inf where the law is undefined. Compiled code only."""
+    raise TypeError("energy_point is compiled code's")
+
+
 # Each overload: per side (material, F, the kind's arguments) as it names them (its signature).
 @overload(tangent_point, inline="always", prefer_literal=True)
 def _tangent_point(laws_, params_, m_, only_, F_, C_, d_):
@@ -214,6 +224,11 @@ def _stress_update_point(laws_, params_, m_, only_, F_, h_n_, h_, P_, d_):
 @overload(stress_tangent_point, inline="always", prefer_literal=True)
 def _stress_tangent_point(laws_, params_, m_, only_, F_, h_n_, h_, P_, C_, d_):
     return _impl(STRESS_TANGENT, _typed_for(only_), (("m_", "F_", ("h_n_", "h_", "P_", "C_", "d_")),))
+
+
+@overload(energy_point, inline="always", prefer_literal=True)
+def _energy_point(laws_, params_, m_, only_, F_, h_, W_, d_):
+    return _impl(ENERGY, _typed_for(only_), (("m_", "F_", ("h_", "W_", "d_")),))
 
 
 @kernel_factory
@@ -304,3 +319,46 @@ def tangent_block(material, F, d):
     kernel = _tangents(d, only_law(laws))
     parallel.chunked(len(flat), kernel, "wwrr", (laws, params, flat, C))
     return C.reshape(shape + (d, d, d, d))
+
+
+@kernel_factory
+def _energies(d, only):                 # literals: F's block embedded, one law's code
+    def energies(laws, params, index, F, h, W):
+        F_p, W_p = scratch((3, 3)), scratch((1,))
+        for p in range(len(W)):
+            for i in range(3):
+                for a in range(3):
+                    F_p[i, a] = F[p, i, a] if i < d and a < d else (1.0 if i == a else 0.0)
+            energy_point(laws, params, index[p], only, F_p, h[p], W_p, d)
+            W[p] = W_p[0]
+    return energies
+
+
+def energy_densities(laws, params, index, F, history):
+    """The stored energy densities (n,) of n points: point p of material index[p] of the law
+    table (laws, params), at F[p] ((n, d, d): the d-block of an embedded F), with the internal
+    variables history[p] in force (each law reads its first n_history columns; (n, 0): none). One
+    pass over the points on the threads, each writing its own density (the same bits for any
+    thread count)."""
+    n, d = len(F), F.shape[1]
+    W = np.empty(n)
+    F = np.ascontiguousarray(F, dtype=float)
+    history = np.ascontiguousarray(history, dtype=float)
+    index = np.asarray(index, dtype=np.int64)
+    parallel.chunked(n, _energies(d, only_law(laws)), "wwrrrr", (laws, params, index, F, history, W))
+    return W
+
+
+def energy(material, F, history=None):
+    """`base.Material.energy`: the stored energy density of ``material`` at embedded F (..., 3, 3)
+    with ``history`` in force (None: the virgin state), shape F.shape[:-2]."""
+    F = np.asarray(F, dtype=float)
+    shape = F.shape[:-2]
+    flat = F.reshape(-1, 3, 3)
+    if material.n_history:
+        h = material.initial_history(1)[0] if history is None else np.asarray(history, dtype=float)
+        h = np.broadcast_to(h, shape + (material.n_history,)).reshape(len(flat), material.n_history)
+    else:
+        h = np.empty((len(flat), 0))
+    laws, params = law_table([material])
+    return energy_densities(laws, params, np.zeros(len(flat), dtype=np.int64), flat, h).reshape(shape)[()]

@@ -52,8 +52,8 @@ ENERGY_POINTS = 20_000       # above this many points, the energy every 10 steps
 def energy_every(scene, stepper):
     """Steps between two rows of the energy history (and checks of the energy balance):
     ``run.energy_every``; by default every step, or every 10th on more than ENERGY_POINTS points
-    (its cost is a pass over them: ~6 % of a DGMPM step). Frames, checkpoints and the last step
-    always get one."""
+    (its cost is a compiled pass over them: 0.9 ms at 256^2, 13 % of a DGMPM DCU step on one
+    thread). Frames, checkpoints and the last step always get one."""
     points = len(stepper.particles)
     value = scene.get("run.energy_every", 1 if points <= ENERGY_POINTS else 10)
     if not (isinstance(value, int) and not isinstance(value, bool) and value >= 1):

@@ -258,10 +258,9 @@ class GodunovScheme:
     def energy(self, state):
         """Kinetic, stored (recoverable) and dissipated (plastic work) energy (J per unit
         thickness in 2D, per unit area in 1D)."""
-        F, p = system.split(state.U, self.d)
-        v = p / self.particles.rho0[:, None]
+        F, _ = system.split(state.U, self.d)
         index, volume = self.particles.material, self.particles.volume
-        kinetic = 0.5 * np.sum(self.particles.mass * np.sum(v * v, axis=1))
+        kinetic = np.sum(system.kinetic_density(state.U, 0.5 * volume / self.particles.rho0))
         stored = np.sum(volume * self.materials.energy(F, index, state.history))
         dissipated = np.sum(volume * self.materials.dissipation(index, state.history)) if self.materials.n_history else 0.0
         return kinetic, stored, dissipated

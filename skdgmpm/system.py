@@ -43,6 +43,26 @@ def _join(d):                           # a literal d: the loops unrolled
     return join
 
 
+def kinetic_density(U, scale):
+    """scale_k |p_k|^2 of each row k of a state array U (n, d*d + d) (scale (n,) = V / (2 rho0):
+    the kinetic energy 1/2 m |v|^2 of the point, p = rho0 v): one compiled pass."""
+    n, d = len(U), DIMENSION[U.shape[1]]
+    out = np.empty(n)
+    parallel.chunked(n, _momentum_squares(d), "rrr", (U, scale, out))
+    return out
+
+
+@kernel_factory
+def _momentum_squares(d):               # a literal d: the loop unrolled
+    def momentum_squares(U, scale, out):
+        for k in range(len(out)):
+            s = 0.0
+            for i in range(d):
+                s += U[k, d * d + i] * U[k, d * d + i]
+            out[k] = scale[k] * s
+    return momentum_squares
+
+
 @kernel_factory
 def _embed(d):
     def embed(F, F3):

@@ -334,3 +334,33 @@ def test_every_registered_law_is_dispatched_and_laws_sharing_a_tangent_share_a_b
         assert sorted(ids) == sorted(KNOWN)                 # every law in exactly one branch
     shared = {ids for ids, _ in _branches(TANGENT) if len(ids) > 1}
     assert shared == {(LinearElastic.law_id, J2Plasticity.law_id), (NeoHookean.law_id, HenckyJ2.law_id)}
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_a_set_of_materials_gives_each_point_its_own_laws_energy(d):
+    """`MaterialSet.energy` (what a run sums, one compiled pass over the points of every material)
+    against closed forms written here in numpy: a neo-Hookean and a small-strain J2 material in
+    turn, the J2 points with a plastic strain in force, F the embedded d-block. The history array
+    is as wide as J2's; the neo-Hookean points never read theirs."""
+    from skdgmpm.constitutive import MaterialSet
+    neo, j2 = NeoHookean(**PARAMS), J2Plasticity(**PARAMS, sigma_y=0.01, H=0.1)
+    n, rng = 40, np.random.default_rng(7)
+    F = np.tile(I3, (n, 1, 1))
+    F[:, :d, :d] += 0.2 * rng.standard_normal((n, d, d))
+    F = F[np.linalg.det(F) > 0.1]
+    n = len(F)
+    index = np.arange(n) % 2
+    ep = 0.01 * rng.standard_normal((n, 3, 3))
+    ep = 0.5 * (ep + np.swapaxes(ep, 1, 2))
+    history = np.zeros((n, 7))
+    history[:, 0] = 0.3
+    for k, (i, j) in enumerate([(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]):
+        history[:, 1 + k] = ep[:, i, j]
+    history[index == 0] = 99.0                                        # never read by the neo-Hookean points
+    J, I1 = np.linalg.det(F), np.einsum("nia,nia->n", F, F)
+    W_neo = 0.5 * neo.mu * (I1 - 3) - neo.mu * np.log(J) + 0.5 * neo.lam * np.log(J) ** 2
+    e = 0.5 * (F + np.swapaxes(F, 1, 2)) - I3 - ep
+    W_j2 = 0.5 * j2.lam * np.trace(e, axis1=1, axis2=2) ** 2 + j2.mu * np.einsum("nab,nab->n", e, e)
+    W = MaterialSet((neo, j2)).energy(np.ascontiguousarray(F[:, :d, :d]), index, history)
+    np.testing.assert_allclose(W, np.where(index == 0, W_neo, W_j2), rtol=1e-12, atol=1e-15)
+    assert np.array_equal(W[index == 1], j2.energy(F[index == 1], history[index == 1]))
