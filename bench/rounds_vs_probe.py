@@ -8,7 +8,10 @@ one step on one and on two threads and the probe's time on each (the probe on t 
 times the work). This prints per method, over the rounds of the files (default: the sessions'
 files in docs/bench from ``--since`` on), how often a round's step reached x1.8, and how that
 changes when only the rounds whose probe reached x1.8, x1.9, x1.95 are kept: whether the misses
-come with the host's minutes or with the code. Measurements of the machine they ran on.
+come with the host's minutes or with the code. A method's rounds whose two-thread step came
+right after the other count's (every round before the forty-fifth session, and the untimed
+settling steps since: `bench.SETTLE`) are counted apart, as "<method>, first step after a switch".
+Measurements of the machine they ran on.
 """
 import argparse
 import collections
@@ -17,6 +20,8 @@ import json
 import re
 
 import numpy as np
+
+SWITCHED = ", first step after a switch"      # the label of rounds whose step followed the other count's
 
 
 def rounds(files, cells):
@@ -29,9 +34,14 @@ def rounds(files, cells):
         for row in data.get("threads_paired", []) if isinstance(data, dict) else []:
             if row.get("cells") != cells or "probe_s" not in row or "2" not in row["wall_s"]:
                 continue
-            w1, w2 = np.array(row["wall_s"]["1"]), np.array(row["wall_s"]["2"])
             p1, p2 = np.array(row["probe_s"]["1"]), np.array(row["probe_s"]["2"])
-            out[row["method"]] += list(zip(w1 / w2, 2 * p1 / p2))
+            # since docs/bench/session54.md §1 each timed step follows a step on its own count, and
+            # the first step after each switch is kept apart: before, every timed step was such
+            timed = "" if "settle" in row else SWITCHED
+            for kind, key in ((timed, "wall_s"), (SWITCHED, "switch_wall_s")):
+                if key in row:
+                    w1, w2 = np.array(row[key]["1"]), np.array(row[key]["2"])
+                    out[row["method"] + kind] += list(zip(w1 / w2, 2 * p1 / p2))
     return {m: np.array(v) for m, v in out.items()}
 
 
