@@ -47,20 +47,21 @@ def _run(name, threads):
     state = disc.initial
     for _ in range(STEPS):
         state = disc.stepper.step(state)
-    return state, disc.stepper.external_work
+    return state, disc.stepper.external_work, disc.stepper.energy(state)
 
 
 @pytest.mark.parametrize("name", list(CASES))
 def test_bits_do_not_depend_on_the_thread_count(name, monkeypatch):
+    """The state, the boundary work and the energies (a run's rows: passes over the points)."""
     monkeypatch.setattr(parallel, "MIN_ROWS", 16)
     try:
         runs = [_run(name, n) for n in (1, 2, 3)]
     finally:
         parallel.set_threads(None)
-    one, work = runs[0]
-    assert one.step == STEPS and np.all(np.isfinite(one.U))
-    for other, other_work in runs[1:]:
-        assert other.t == one.t and other_work == work
+    one, work, energy = runs[0]
+    assert one.step == STEPS and np.all(np.isfinite(one.U)) and np.all(np.isfinite(energy)) and energy[0] > 0
+    for other, other_work, other_energy in runs[1:]:
+        assert other.t == one.t and other_work == work and other_energy == energy
         for a, b in ((one.U, other.U), (one.Q, other.Q), (one.x, other.x)):
             assert np.array_equal(a, b)
         if one.dofs is not None:
