@@ -66,15 +66,6 @@ def _inverse_transpose(F):
                      (b * f - c * e) * r, (c * d - a * f) * r, (a * e - b * d) * r)
 
 
-@njit(cache=True, inline="always")
-def determinant(F):
-    """det F of one (3, 3) F, expanded along its first row as `_inverse_transpose` expands it."""
-    a, b, c = F[0, 0], F[0, 1], F[0, 2]
-    d, e, f = F[1, 0], F[1, 1], F[1, 2]
-    g, h, i = F[2, 0], F[2, 1], F[2, 2]
-    return a * (e * i - f * h) + b * (f * g - d * i) + c * (d * h - e * g)
-
-
 def cofactor(F):
     """Cofactor matrix cof F = det(F) F^-T and det F of ``(..., 3, 3)`` arrays, in closed form
     (a compiled loop over the points; det F = 0 gives cof F anyway)."""
@@ -102,18 +93,18 @@ class PointLaw(NamedTuple):
     """A law's compiled point functions (njit, for any d; F embedded (3, 3), prm its
     ``law_parameters``), its class's ``point_law``: ``tangent(F, prm, C, d)``, the d-block of the
     tangent the Riemann solver and the wave-speed check use (possibly another law's function: the
-    laws then share a branch of the dispatch), and either ``stress(F, prm, P, d)`` (hyperelastic)
-    or ``update(F, prm, h_n, h, P, d)`` (a law with history: its return mapping);
-    ``stress_tangent(F, prm, P, C, d)`` where computing both at once is cheaper than apart;
-    ``energy(F, prm, h, W, d)``, every law's: W[0] = the stored (recoverable) energy density at F
-    with the internal variables h in force (zero wide for a hyperelastic law), +inf where the law
-    is undefined (J <= 0). `materials.points` makes every kernel's dispatch from these."""
+    laws then share a branch of the dispatch); ``energy(F, prm, h, W, d)``: W[0] = the stored
+    (recoverable) energy density at F with the internal variables h in force (zero wide for a
+    hyperelastic law), +inf where the law is undefined (J <= 0); and either ``stress(F, prm, P,
+    d)`` (hyperelastic) or ``update(F, prm, h_n, h, P, d)`` (a law with history: its return
+    mapping); ``stress_tangent(F, prm, P, C, d)`` where computing both at once is cheaper than
+    apart. `materials.points` makes every kernel's dispatch from these."""
 
     tangent: object
+    energy: object
     stress: object = None
     update: object = None
     stress_tangent: object = None
-    energy: object = None
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .base import Material, PointLaw, _check_parameter, _inverse_transpose, cofactor, determinant
+from .base import Material, PointLaw, _check_parameter, _inverse_transpose, cofactor
 
 
 @njit(cache=True, inline="always")
@@ -81,17 +81,12 @@ def energy_point(F, prm, h, W, d):
     """W[0] = c1 (I1 - 3) + c2 (I2 - 3) - m ln J + lam/2 (ln J)^2 at one embedded F (3, 3), I1 and I2
     the invariants of C = F^T F, +inf where J <= 0; prm = (c1, c2, m, lam)."""
     c1, c2, m, lam = prm[0], prm[1], prm[2], prm[3]
-    J = determinant(F)
-    if J > 0.0:
-        I1, CC = 0.0, 0.0
+    ok, J, _, I1, C, _ = _invariants(F)
+    if ok:
+        CC = 0.0
         for a in range(3):
             for b in range(3):
-                s = 0.0
-                for k in range(3):
-                    s += F[k, a] * F[k, b]
-                CC += s * s
-                if a == b:
-                    I1 += s
+                CC += C[a, b] * C[a, b]
         I2 = 0.5 * (I1 * I1 - CC)
         ln_J = np.log(J)
         W[0] = c1 * (I1 - 3.0) + c2 * (I2 - 3.0) - m * ln_J + 0.5 * lam * ln_J * ln_J

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from .base import Material, PointLaw, _inverse_transpose, cofactor, determinant
+from .base import Material, PointLaw, _inverse_transpose, cofactor
 
 
 @njit(cache=True, inline="always")
@@ -68,8 +68,8 @@ def energy_point(F, prm, h, W, d):
     """W[0] = mu/2 (tr(F^T F) - 3) - mu ln J + lam/2 (ln J)^2 at one embedded F (3, 3), +inf where
     J <= 0; prm = (mu, lam)."""
     mu, lam = prm[0], prm[1]
-    J = determinant(F)
-    if J > 0.0:
+    ok, J, _ = _inverse_transpose(F)
+    if ok:
         I1 = 0.0
         for i in range(3):
             for a in range(3):

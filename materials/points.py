@@ -23,6 +23,7 @@ from numba import njit, types
 from numba.extending import overload
 
 from skdgmpm import parallel
+from skdgmpm.equations import embed
 from skdgmpm.kernel_cache import kernel_factory, scratch
 
 from . import LAWS as _REGISTERED
@@ -35,9 +36,6 @@ N_PARAMETERS = 4        # the widest law_parameters
 LAWS = {law.law_id: law.point_law for law in _REGISTERED.values()}
 if len(LAWS) != len(_REGISTERED):
     raise ImportError(f"materials.LAWS: two laws share a law_id ({[law.law_id for law in _REGISTERED.values()]})")
-for _name, _law in _REGISTERED.items():
-    if _law.point_law.energy is None:
-        raise ImportError(f"materials.LAWS: {_name} has no compiled point energy (PointLaw(..., energy=...))")
 KNOWN = tuple(LAWS)
 ANY_LAW = -1
 
@@ -326,9 +324,7 @@ def _energies(d, only):                 # literals: F's block embedded, one law'
     def energies(laws, params, index, F, h, W):
         F_p, W_p = scratch((3, 3)), scratch((1,))
         for p in range(len(W)):
-            for i in range(3):
-                for a in range(3):
-                    F_p[i, a] = F[p, i, a] if i < d and a < d else (1.0 if i == a else 0.0)
+            embed(F[p], F_p, d)
             energy_point(laws, params, index[p], only, F_p, h[p], W_p, d)
             W[p] = W_p[0]
     return energies
@@ -342,7 +338,7 @@ def energy_densities(laws, params, index, F, history):
     thread count)."""
     n, d = len(F), F.shape[1]
     W = np.empty(n)
-    F = np.ascontiguousarray(F, dtype=float)
+    F = np.reshape(F, (n, d * d))             # rows of a state array stay a view (`equations.embed`)
     history = np.ascontiguousarray(history, dtype=float)
     index = np.asarray(index, dtype=np.int64)
     parallel.chunked(n, _energies(d, only_law(laws)), "wwrrrr", (laws, params, index, F, history, W))

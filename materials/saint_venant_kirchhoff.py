@@ -5,17 +5,16 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from skdgmpm.kernel_cache import scratch
+
 from .base import Material, PointLaw
 
 _I = np.eye(3)
 
 
 @njit(cache=True, inline="always")
-def stress_point(F, prm, P, d):
-    """d-block P (d, d) of P = F S, S = lam tr(E) I + 2 mu E, at one embedded F (3, 3); prm =
-    (mu, lam). F is block diagonal, so P's d-block only needs S's d-block (tr E is the 3D one)."""
-    mu, lam = prm[0], prm[1]
-    E = np.empty((3, 3))
+def _green_lagrange_point(F, E):
+    """E = (F^T F - I) / 2 of one embedded F (3, 3) into E (3, 3); returns tr E."""
     trE = 0.0
     for a in range(3):
         for b in range(3):
@@ -24,6 +23,16 @@ def stress_point(F, prm, P, d):
                 s += F[k, a] * F[k, b]
             E[a, b] = 0.5 * (s - (1.0 if a == b else 0.0))
         trE += E[a, a]
+    return trE
+
+
+@njit(cache=True, inline="always")
+def stress_point(F, prm, P, d):
+    """d-block P (d, d) of P = F S, S = lam tr(E) I + 2 mu E, at one embedded F (3, 3); prm =
+    (mu, lam). F is block diagonal, so P's d-block only needs S's d-block (tr E is the 3D one)."""
+    mu, lam = prm[0], prm[1]
+    E = np.empty((3, 3))
+    trE = _green_lagrange_point(F, E)
     for i in range(d):
         for a in range(d):
             s = 0.0
@@ -61,16 +70,12 @@ def tangent_point(F, prm, C, d):
 def energy_point(F, prm, h, W, d):
     """W[0] = lam/2 tr(E)^2 + mu E:E at one embedded F (3, 3), E = (F^T F - I) / 2; prm = (mu, lam)."""
     mu, lam = prm[0], prm[1]
-    tr, ee = 0.0, 0.0
+    E = scratch((3, 3))
+    tr = _green_lagrange_point(F, E)
+    ee = 0.0
     for a in range(3):
         for b in range(3):
-            s = 0.0
-            for k in range(3):
-                s += F[k, a] * F[k, b]
-            E = 0.5 * (s - (1.0 if a == b else 0.0))
-            ee += E * E
-            if a == b:
-                tr += E
+            ee += E[a, b] * E[a, b]
     W[0] = 0.5 * lam * tr * tr + mu * ee
 
 

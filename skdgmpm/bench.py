@@ -57,10 +57,9 @@ import resource
 import statistics
 import threading
 import time
+from typing import NamedTuple
 
 import numpy as np
-
-from typing import NamedTuple
 
 from . import peer
 from .bench_kernels import arithmetic_rows
